@@ -1,0 +1,3 @@
+from kasparctl.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,187 @@
+"""Tabular Q-learning with a Boltzmann softmax: the paper's section III, Eq. 1-3.
+
+Pure functions over numpy arrays. This module imports nothing else of the
+project, so the game, the simulator and the tests share one definition of the
+learner. States are targets (a bag, or a location in the pilot), actions are
+labels (the toys' names, or the toys in the pilot).
+
+Each operation has a scalar form (one table row, used by the game) and a batch
+form over many independent rows (used by the vectorised simulator); the tests
+hold the two to the same numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+
+class LearnerError(ValueError):
+    """A learner parameter or a serialised learner state is unusable.
+
+    `key` names the offending parameter, so a configuration error can point at it.
+    """
+
+    def __init__(self, message: str, key: str = "") -> None:
+        super().__init__(message)
+        self.key = key
+
+
+@dataclass(frozen=True, slots=True)
+class LearnerParams:
+    """The learner's parameters. The defaults are the paper's."""
+
+    alpha: float = 0.6
+    beta: float = 8.0
+    # The paper does not state gamma. A guess is a one-step problem: the game, not
+    # the robot's action, picks the next target, so there is nothing to bootstrap
+    # from; gamma = 0 reduces Eq. 1 to the delta rule the paper's results fit.
+    gamma: float = 0.0
+    reward_green: float = 1.0
+    reward_red: float = -1.0
+    # Q0 = 0 makes every label equally likely at first: the paper's starting
+    # entropy of log2(6) = 2.585 bits with six toys.
+    initial_q: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("alpha", "beta", "gamma", "reward_green", "reward_red", "initial_q"):
+            value = getattr(self, name)
+            if not math.isfinite(value):
+                raise LearnerError(f"expected a finite number, found {value!r}", name)
+        if not 0.0 < self.alpha <= 1.0:
+            raise LearnerError(f"expected a number in (0, 1], found {self.alpha!r}", "alpha")
+        if self.beta < 0.0:
+            raise LearnerError(f"expected a number >= 0, found {self.beta!r}", "beta")
+        if not 0.0 <= self.gamma < 1.0:
+            raise LearnerError(f"expected a number in [0, 1), found {self.gamma!r}", "gamma")
+
+    def reward(self, green: bool) -> float:
+        return self.reward_green if green else self.reward_red
+
+
+def new_table(n_states: int, n_actions: int, params: LearnerParams) -> FloatArray:
+    if n_states < 1 or n_actions < 1:
+        raise LearnerError(f"a Q table needs at least 1x1, asked for {n_states}x{n_actions}")
+    return np.full((n_states, n_actions), params.initial_q, dtype=np.float64)
+
+
+def softmax(q_row: FloatArray, beta: float, candidates: BoolArray | None = None) -> FloatArray:
+    """Eq. 2 over the candidates; a non-candidate gets probability exactly 0.
+
+    Q is shifted by its largest candidate value before scaling, so no Q
+    magnitude overflows: every exponent is <= 0 and the best candidate's is 0.
+    """
+    q = np.asarray(q_row, dtype=np.float64)
+    allowed = np.ones(q.shape, dtype=bool) if candidates is None else np.asarray(candidates)
+    if not allowed.any():
+        raise LearnerError("softmax needs at least one candidate")
+    if beta == 0.0:
+        return allowed / np.count_nonzero(allowed)
+    with np.errstate(over="ignore", invalid="ignore"):
+        shifted = np.where(allowed, q - q[allowed].max(), -np.inf)
+        weights = np.exp(beta * shifted)
+    return weights / weights.sum()
+
+
+def entropy_bits(probabilities: FloatArray) -> float:
+    """Eq. 3 in bits; zero probabilities (non-candidates) contribute nothing."""
+    p = probabilities[probabilities > 0.0]
+    return max(0.0, float(-(p * np.log2(p)).sum()))
+
+
+def choose(probabilities: FloatArray, rng: np.random.Generator) -> int:
+    """Draw one action; an action of probability 0 is never drawn."""
+    cumulative = np.cumsum(probabilities)
+    index = int(np.searchsorted(cumulative, rng.random() * cumulative[-1], side="right"))
+    # Rounding can put the draw past the last step of the cumulative sum.
+    return min(index, int(np.flatnonzero(probabilities)[-1]))
+
+
+def updated_value(
+    q_sa: float, reward: float, params: LearnerParams, next_max: float = 0.0
+) -> float:
+    """Eq. 1: Q(s,a) + alpha * (r + gamma * max_a' Q(s',a') - Q(s,a))."""
+    return q_sa + params.alpha * (reward + params.gamma * next_max - q_sa)
+
+
+def update(
+    table: FloatArray,
+    state: int,
+    action: int,
+    reward: float,
+    params: LearnerParams,
+    next_state: int | None = None,
+) -> FloatArray:
+    """Return a new table with Eq. 1 applied; `next_state` None means terminal."""
+    next_max = 0.0 if next_state is None else float(table[next_state].max())
+    result = table.copy()
+    result[state, action] = updated_value(float(table[state, action]), reward, params, next_max)
+    return result
+
+
+def softmax_batch(q: FloatArray, beta: FloatArray, candidates: BoolArray | None = None) -> FloatArray:
+    """Eq. 2 for many independent rows at once; `beta` has one value per row."""
+    allowed = np.ones(q.shape, dtype=bool) if candidates is None else candidates
+    with np.errstate(over="ignore", invalid="ignore"):
+        best = np.where(allowed, q, -np.inf).max(axis=1, keepdims=True)
+        shifted = np.where(allowed, q - best, -np.inf)
+        scaled = np.where(allowed, beta[:, None] * shifted, -np.inf)
+        weights = np.exp(scaled)
+    return weights / weights.sum(axis=1, keepdims=True)
+
+
+def entropy_bits_batch(probabilities: FloatArray) -> FloatArray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        terms = np.where(probabilities > 0.0, probabilities * np.log2(probabilities), 0.0)
+    return np.maximum(0.0, -terms.sum(axis=1))
+
+
+def choose_batch(probabilities: FloatArray, rng: np.random.Generator) -> NDArray[np.intp]:
+    cumulative = np.cumsum(probabilities, axis=1)
+    draws = rng.random(len(probabilities))[:, None] * cumulative[:, -1:]
+    index = (cumulative <= draws).sum(axis=1)
+    last_possible = probabilities.shape[1] - 1 - np.argmax(probabilities[:, ::-1] > 0.0, axis=1)
+    return np.minimum(index, last_possible)
+
+
+@dataclass(slots=True)
+class LearnerState:
+    """A Q table and the random generator of the learner's choices.
+
+    Both serialise to plain data (JSON-ready) and back without loss, so a
+    resumed session makes the very choices it would have made.
+    """
+
+    table: FloatArray
+    rng: np.random.Generator = field(default_factory=np.random.default_rng)
+
+    @classmethod
+    def fresh(
+        cls, n_states: int, n_actions: int, params: LearnerParams, seed: int | None
+    ) -> LearnerState:
+        return cls(new_table(n_states, n_actions, params), np.random.default_rng(seed))
+
+    def to_plain(self) -> dict[str, Any]:
+        # Python's float repr round-trips exactly, so JSON keeps every bit of Q.
+        return {"q": self.table.tolist(), "rng": self.rng.bit_generator.state}
+
+    @classmethod
+    def from_plain(cls, data: dict[str, Any]) -> LearnerState:
+        try:
+            table = np.array(data["q"], dtype=np.float64)
+            generator_state = data["rng"]
+            bit_generator_cls = getattr(np.random, generator_state["bit_generator"])
+            bit_generator = bit_generator_cls()
+            bit_generator.state = generator_state
+        except (KeyError, TypeError, ValueError, AttributeError) as error:
+            raise LearnerError(f"unusable learner state: {error}") from error
+        if table.ndim != 2 or table.size == 0 or not np.isfinite(table).all():
+            raise LearnerError(f"learner state q must be a finite 2-D table, found {data['q']!r}")
+        return cls(table, np.random.Generator(bit_generator))

@@ -1,0 +1,1 @@
+"""What Kaspar says: one TOML file per language, shipped as package data."""
