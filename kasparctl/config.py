@@ -8,6 +8,7 @@ to a default in front of children.
 from __future__ import annotations
 
 import re
+import tomllib
 import types
 import typing
 from pathlib import Path
@@ -155,13 +156,16 @@ def load_config(path: str | Path) -> Config:
 
 
 def parse_config(data: bytes | str, source: str, base_dir: Path | None = None) -> Config:
+    text = data.decode("utf-8", errors="replace") if isinstance(data, bytes) else data
     try:
-        config = msgspec.toml.decode(data, type=Config)
-    except msgspec.ValidationError as error:
-        key, message = _explain_validation_error(str(error))
-        raise ConfigError(source, key, message) from error
-    except msgspec.DecodeError as error:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
         raise ConfigError(source, "(syntax)", f"not valid TOML: {error}") from error
+    try:
+        config = msgspec.convert(raw, type=Config)
+    except msgspec.ValidationError as error:
+        key, message = _explain_validation_error(str(error), raw)
+        raise ConfigError(source, key, message) from error
     _validate(config, source)
     if base_dir is not None:
         config = _resolve_paths(config, base_dir)
@@ -179,18 +183,21 @@ def _resolve_paths(config: Config, base_dir: Path) -> Config:
 _PATH_SEGMENT = re.compile(r"\.([A-Za-z_][\w-]*)|\[(\d+|\.\.\.)\]")
 
 
-def _explain_validation_error(text: str) -> tuple[str, str]:
+def _explain_validation_error(text: str, raw: dict[str, Any]) -> tuple[str, str]:
     """Turn msgspec's "message - at `$.a.b[0]`" into a key path and a readable message."""
     message, _, where = text.rpartition(" - at ")
     if not message:
-        return "(top level)", text
+        message, where = text, ""
     segments = [name or f"[{index}]" for name, index in _PATH_SEGMENT.findall(where.strip("`$"))]
+    segments = _name_dict_keys(segments, raw)
     field_type = _type_at(segments)
     unknown = re.fullmatch(r"Object contains unknown field `(.+)`", message)
     if unknown:
         segments.append(unknown.group(1))
         allowed = _field_names(field_type)
-        message = f"unknown key; expected one of: {', '.join(allowed)}" if allowed else "unknown key"
+        message = (
+            f"unknown key; expected one of: {', '.join(allowed)}" if allowed else "unknown key"
+        )
     missing = re.fullmatch(r"Object missing required field `(.+)`", message)
     if missing:
         segments.append(missing.group(1))
@@ -204,6 +211,35 @@ def _explain_validation_error(text: str) -> tuple[str, str]:
         message = f"expected {got.group(1)}, found {got.group(2)}"
     key = "".join(s if s.startswith("[") else f".{s}" for s in segments).lstrip(".")
     return key or "(top level)", message
+
+
+def _name_dict_keys(segments: list[str], raw: Any) -> list[str]:
+    """msgspec writes a table of tables' key as [...]; find which entry fails."""
+    named: list[str] = []
+    for segment in segments:
+        if segment == "[...]" and isinstance(raw, dict):
+            entry_type = _type_at([*named, "[...]"])
+            segment = next(
+                (key for key, value in raw.items() if not _converts(value, entry_type)), "[...]"
+            )
+            named.append(segment)
+            raw = raw.get(segment)
+            continue
+        named.append(segment)
+        if isinstance(raw, dict):
+            raw = raw.get(segment)
+        elif isinstance(raw, list) and segment.strip("[]").isdigit():
+            index = int(segment.strip("[]"))
+            raw = raw[index] if index < len(raw) else None
+    return named
+
+
+def _converts(value: Any, target_type: Any) -> bool:
+    try:
+        msgspec.convert(value, type=target_type)
+    except msgspec.ValidationError:
+        return False
+    return True
 
 
 def _type_at(segments: list[str]) -> Any:
@@ -237,22 +273,26 @@ def _validate(config: Config, source: str) -> None:
             profile.params()
         except LearnerError as error:
             fail(f"learner.profiles.{name}.{error.key}", str(error))
+    known_profiles = ", ".join(sorted(profiles))
     if config.learner.default_profile not in profiles:
-        fail(
-            "learner.default_profile",
-            f"expected one of {', '.join(sorted(profiles))}, found {config.learner.default_profile!r}",
-        )
+        found = config.learner.default_profile
+        fail("learner.default_profile", f"expected one of {known_profiles}, found {found!r}")
 
     game = config.game
     _check_names(game.toys, "game.toys", fail, minimum=2)
     if game.variant == "pilot":
         _check_names(game.locations, "game.locations", fail, minimum=1)
     elif game.locations:
-        fail("game.locations", "only the pilot variant uses locations; remove it or set variant = 'pilot'")
+        fail(
+            "game.locations",
+            "only the pilot variant uses locations; remove it or set variant = 'pilot'",
+        )
     if not 1 <= game.children_per_group <= 6:
         fail("game.children_per_group", f"expected 1 to 6, found {game.children_per_group}")
     if game.correct_answers_to_learn < 1:
-        fail("game.correct_answers_to_learn", f"expected >= 1, found {game.correct_answers_to_learn}")
+        fail(
+            "game.correct_answers_to_learn", f"expected >= 1, found {game.correct_answers_to_learn}"
+        )
     if game.max_trials_per_target < game.correct_answers_to_learn:
         fail(
             "game.max_trials_per_target",
@@ -269,11 +309,18 @@ def _validate(config: Config, source: str) -> None:
             fail(f"{where}.group", f"group code {plan.group!r} is planned twice")
         seen_groups.add(plan.group)
         if plan.profile not in profiles:
-            fail(f"{where}.profile", f"expected one of {', '.join(sorted(profiles))}, found {plan.profile!r}")
+            fail(
+                f"{where}.profile",
+                f"expected one of {known_profiles}, found {plan.profile!r}",
+            )
         if plan.children:
             _check_names(plan.children, f"{where}.children", fail, minimum=1)
             if plan.group_size is not None and plan.group_size != len(plan.children):
-                fail(f"{where}.group_size", f"expected {len(plan.children)} (one per name in children), found {plan.group_size}")
+                fail(
+                    f"{where}.group_size",
+                    f"expected {len(plan.children)} (one per name in children), "
+                    f"found {plan.group_size}",
+                )
         if plan.group_size is not None and not 1 <= plan.group_size <= 6:
             fail(f"{where}.group_size", f"expected 1 to 6, found {plan.group_size}")
         if plan.answer_key:
@@ -281,7 +328,10 @@ def _validate(config: Config, source: str) -> None:
 
 
 def _check_names(
-    names: tuple[str, ...], key: str, fail: typing.Callable[[str, str], typing.NoReturn], minimum: int
+    names: tuple[str, ...],
+    key: str,
+    fail: typing.Callable[[str, str], typing.NoReturn],
+    minimum: int,
 ) -> None:
     if len(names) < minimum:
         fail(key, f"expected at least {minimum} names, found {len(names)}")
@@ -290,7 +340,9 @@ def _check_names(
             fail(f"{key}[{index}]", "expected a name, found an empty string")
     duplicates = sorted({name for name in names if names.count(name) > 1})
     if duplicates:
-        fail(key, f"expected distinct names, found {', '.join(map(repr, duplicates))} more than once")
+        fail(
+            key, f"expected distinct names, found {', '.join(map(repr, duplicates))} more than once"
+        )
 
 
 def _check_answer_key(
@@ -301,8 +353,15 @@ def _check_answer_key(
 ) -> None:
     targets = game.targets
     if len(answer_key) != len(targets):
-        fail(key, f"expected {len(targets)} toys (one per target: {', '.join(targets)}), found {len(answer_key)}")
+        fail(
+            key,
+            f"expected {len(targets)} toys (one per target: {', '.join(targets)}), "
+            f"found {len(answer_key)}",
+        )
     for index, toy in enumerate(answer_key):
         if toy not in game.toys:
-            fail(f"{key}[{index}]", f"expected one of game.toys ({', '.join(game.toys)}), found {toy!r}")
+            fail(
+                f"{key}[{index}]",
+                f"expected one of game.toys ({', '.join(game.toys)}), found {toy!r}",
+            )
     _check_names(answer_key, key, fail, minimum=1)

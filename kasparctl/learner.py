@@ -12,6 +12,8 @@ hold the two to the same numbers.
 
 from __future__ import annotations
 
+import bisect
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -77,31 +79,53 @@ def softmax(q_row: FloatArray, beta: float, candidates: BoolArray | None = None)
 
     Q is shifted by its largest candidate value before scaling, so no Q
     magnitude overflows: every exponent is <= 0 and the best candidate's is 0.
+    The arithmetic is the batch form's, step for step, so both give the same bits.
     """
     q = np.asarray(q_row, dtype=np.float64)
-    allowed = np.ones(q.shape, dtype=bool) if candidates is None else np.asarray(candidates)
-    if not allowed.any():
-        raise LearnerError("softmax needs at least one candidate")
+    values = q.tolist()
+    # Reductions over six numbers are far cheaper in Python than in numpy, and
+    # this runs before every guess; the element-wise maths stays in numpy.
+    if candidates is None:
+        allowed = None
+        best = max(values)
+    else:
+        allowed = np.asarray(candidates, dtype=bool)
+        flags = allowed.tolist()
+        if not any(flags):
+            raise LearnerError("softmax needs at least one candidate")
+        best = max(itertools.compress(values, flags))
     if beta == 0.0:
-        return allowed / np.count_nonzero(allowed)
-    with np.errstate(over="ignore", invalid="ignore"):
-        shifted = np.where(allowed, q - q[allowed].max(), -np.inf)
-        weights = np.exp(beta * shifted)
+        uniform = np.ones(q.shape) if allowed is None else allowed.astype(np.float64)
+        return uniform / uniform.sum()
+    if beta * (max(values) - min(values)) <= _SAFE_EXPONENT:
+        weights = np.exp(beta * (q - best))
+    else:
+        with np.errstate(over="ignore", invalid="ignore"):
+            shifted = q - best if allowed is None else np.where(allowed, q - best, -np.inf)
+            weights = np.exp(beta * shifted)
+    if allowed is not None:
+        weights = weights * allowed  # exactly 0 for a non-candidate, unchanged otherwise
     return weights / weights.sum()
+
+
+# Below this, exp(beta * (q - best)) can neither overflow nor warn for any entry.
+_SAFE_EXPONENT = 700.0
 
 
 def entropy_bits(probabilities: FloatArray) -> float:
     """Eq. 3 in bits; zero probabilities (non-candidates) contribute nothing."""
-    p = probabilities[probabilities > 0.0]
-    return max(0.0, float(-(p * np.log2(p)).sum()))
+    total = -sum(p * math.log2(p) for p in probabilities.tolist() if p > 0.0)
+    return max(0.0, total)
 
 
 def choose(probabilities: FloatArray, rng: np.random.Generator) -> int:
     """Draw one action; an action of probability 0 is never drawn."""
-    cumulative = np.cumsum(probabilities)
-    index = int(np.searchsorted(cumulative, rng.random() * cumulative[-1], side="right"))
+    values = probabilities.tolist()
+    cumulative = list(itertools.accumulate(values))
+    index = bisect.bisect_right(cumulative, rng.random() * cumulative[-1])
     # Rounding can put the draw past the last step of the cumulative sum.
-    return min(index, int(np.flatnonzero(probabilities)[-1]))
+    last_possible = max(i for i, p in enumerate(values) if p > 0.0)
+    return min(index, last_possible)
 
 
 def updated_value(
@@ -126,14 +150,19 @@ def update(
     return result
 
 
-def softmax_batch(q: FloatArray, beta: FloatArray, candidates: BoolArray | None = None) -> FloatArray:
+def softmax_batch(
+    q: FloatArray, beta: FloatArray, candidates: BoolArray | None = None
+) -> FloatArray:
     """Eq. 2 for many independent rows at once; `beta` has one value per row."""
     allowed = np.ones(q.shape, dtype=bool) if candidates is None else candidates
+    if not allowed.any(axis=1).all():
+        raise LearnerError("softmax needs at least one candidate in every row")
     with np.errstate(over="ignore", invalid="ignore"):
         best = np.where(allowed, q, -np.inf).max(axis=1, keepdims=True)
         shifted = np.where(allowed, q - best, -np.inf)
-        scaled = np.where(allowed, beta[:, None] * shifted, -np.inf)
-        weights = np.exp(scaled)
+        # beta 0 is uniform over the candidates; 0 * -inf (an overflowed spread) is NaN.
+        scaled = np.where(beta[:, None] == 0.0, 0.0, beta[:, None] * shifted)
+        weights = np.exp(np.where(allowed, scaled, -np.inf))
     return weights / weights.sum(axis=1, keepdims=True)
 
 

@@ -1,0 +1,462 @@
+"""`kasparctl simulate`: replicate the pilot study (or sweep the learner) with simulated children.
+
+Without --config it plays the paper's pilot (3 locations, 6 toys) with the
+built-in profiles; with --config the game and profiles come from kaspar.toml.
+--alpha, --beta and --gamma override the chosen profile's values.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import msgspec
+import numpy as np
+
+from kasparctl.config import (
+    BUILTIN_PROFILES,
+    ConfigError,
+    GameSettings,
+    ProfileSettings,
+    load_config,
+)
+from kasparctl.learner import LearnerError, LearnerParams
+from kasparctl.simulate import SimulationError, playable, simulate_study
+from kasparctl.study_stats import StudyStats, summarise
+from kasparctl.sweep import PilotShape, sweep
+from kasparctl.teacher import Teacher
+
+# The pilot study's figures (section IV), shown beside a pilot simulation.
+PAPER = {
+    "problems": 48,
+    "trials_total": 202,
+    "trials_mean": 4.21,
+    "trials_sd": 1.46,
+    "trials_min": 2,
+    "trials_max": 7,
+    "first_guess_correct": 7,
+    "perseverative_errors": 1,
+    "win_shifts": 1,
+    "initial_entropy": 2.585,
+    "final_entropy_mean": 0.73,
+    "final_entropy_sd": 0.58,
+}
+SWEEPABLE = ("alpha", "beta")
+# Below this many groups the scalar simulation takes about a second; no bar.
+PROGRESS_MIN_GROUPS = 2000
+MAX_SWEEP_VALUES = 1000
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "simulate",
+        help="simulate groups of children teaching Kaspar (the pilot study), or sweep the learner",
+        description=__doc__,
+    )
+    parser.add_argument(
+        "--groups",
+        type=_positive_int,
+        default=16,
+        help="groups of children (default 16, as in the pilot)",
+    )
+    parser.add_argument(
+        "--seed",
+        type=_seed,
+        default=None,
+        help="random seed (default: the config's game.seed, else fresh)",
+    )
+    parser.add_argument(
+        "--profile",
+        default=None,
+        help="learner profile (default: the config's default, else 'paper')",
+    )
+    parser.add_argument(
+        "--alpha",
+        type=_finite_float,
+        default=None,
+        help="learning rate, overrides the profile",
+    )
+    parser.add_argument(
+        "--beta",
+        type=_finite_float,
+        default=None,
+        help="inverse temperature, overrides the profile",
+    )
+    parser.add_argument(
+        "--gamma",
+        type=_finite_float,
+        default=None,
+        help="discount factor, overrides the profile",
+    )
+    parser.add_argument(
+        "--variant",
+        choices=("pilot", "names"),
+        default=None,
+        help="game variant (default: the config's, else pilot)",
+    )
+    parser.add_argument(
+        "--p-wrong-green",
+        type=_probability,
+        default=0.0,
+        help="chance of a green for a wrong guess",
+    )
+    parser.add_argument(
+        "--p-wrong-red", type=_probability, default=0.0, help="chance of a red for a right guess"
+    )
+    parser.add_argument(
+        "--p-no-answer", type=_probability, default=0.0, help="chance nobody answers a guess"
+    )
+    parser.add_argument(
+        "--config", default=None, help="kaspar.toml to take the game settings and profiles from"
+    )
+    parser.add_argument(
+        "--json", action="store_true", help="print one JSON object (a list with --sweep)"
+    )
+    parser.add_argument(
+        "--sweep",
+        action="append",
+        type=_sweep_range,
+        default=[],
+        metavar="NAME=START:STOP:STEP",
+        help="sweep alpha or beta over an inclusive range (repeatable; vectorised pilot problems)",
+    )
+    parser.set_defaults(run=run)
+
+
+class UsageError(Exception):
+    """A bad option value found after parsing; the message names the option."""
+
+
+def run(arguments: argparse.Namespace) -> int:
+    try:
+        game, profiles, default_profile, config_seed = _settings(arguments.config)
+        params, profile_name = _params(arguments, profiles, default_profile)
+        teacher = Teacher(arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)
+        if arguments.variant is not None:
+            game = msgspec.structs.replace(game, variant=arguments.variant)
+        game = playable(game)
+    except (ConfigError, UsageError, SimulationError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    seed = arguments.seed if arguments.seed is not None else config_seed
+    if seed is None:
+        # Drawn here and printed, so any run can be repeated.
+        seed = int(np.random.SeedSequence().entropy % (1 << 63))
+    context = {
+        "variant": game.variant,
+        "groups": arguments.groups,
+        "seed": seed,
+        "profile": profile_name,
+        "alpha": params.alpha,
+        "beta": params.beta,
+        "gamma": params.gamma,
+        "p_wrong_green": teacher.p_wrong_green,
+        "p_wrong_red": teacher.p_wrong_red,
+        "p_no_answer": teacher.p_no_answer,
+    }
+    if arguments.sweep:
+        return _run_sweep(arguments, game, params, teacher, seed, context)
+
+    with _progress(arguments.groups) as on_group:
+        records = simulate_study(arguments.groups, game, params, teacher, seed, on_group)
+    stats = summarise(records)
+    if arguments.json:
+        print(json.dumps({**context, **msgspec.to_builtins(stats)}, allow_nan=False))
+    else:
+        print(_stats_table(stats, context, len(game.toys), len(game.targets)))
+    return 0
+
+
+def _settings(
+    config_path: str | None,
+) -> tuple[GameSettings, dict[str, ProfileSettings], str, int | None]:
+    if config_path is None:
+        return GameSettings(variant="pilot"), dict(BUILTIN_PROFILES), "paper", None
+    config = load_config(config_path)
+    return (
+        config.game,
+        config.learner.all_profiles(),
+        config.learner.default_profile,
+        config.game.seed,
+    )
+
+
+def _params(
+    arguments: argparse.Namespace, profiles: dict[str, ProfileSettings], default_profile: str
+) -> tuple[LearnerParams, str]:
+    name = arguments.profile or default_profile
+    if name not in profiles:
+        raise UsageError(
+            f"--profile: expected one of {', '.join(sorted(profiles))}, found {name!r}"
+        )
+    overrides = {
+        key: getattr(arguments, key)
+        for key in ("alpha", "beta", "gamma")
+        if getattr(arguments, key) is not None
+    }
+    try:
+        params = dataclasses.replace(profiles[name].params(), **overrides)
+    except LearnerError as error:
+        option = f"--{error.key}" if error.key in overrides else f"profile {name!r}: {error.key}"
+        raise UsageError(f"{option}: {error}") from error
+    label = name + (
+        " with " + ", ".join(f"{k} {v:g}" for k, v in overrides.items()) if overrides else ""
+    )
+    return params, label
+
+
+def _run_sweep(
+    arguments: argparse.Namespace,
+    game: GameSettings,
+    params: LearnerParams,
+    teacher: Teacher,
+    seed: int,
+    context: dict[str, Any],
+) -> int:
+    if game.variant != "pilot":
+        print(
+            "error: --sweep: expected the pilot variant (the vectorised path plays pilot "
+            f"problems), found variant {game.variant!r}",
+            file=sys.stderr,
+        )
+        return 1
+    ranges = dict(arguments.sweep)
+    if len(ranges) != len(arguments.sweep):
+        print(
+            "error: --sweep: expected each of alpha, beta at most once, found one twice",
+            file=sys.stderr,
+        )
+        return 1
+    alphas = ranges.get("alpha", [params.alpha])
+    betas = ranges.get("beta", [params.beta])
+    settings = [(a, b) for a in alphas for b in betas]
+    shape = PilotShape.from_game(game)
+    problems = arguments.groups * shape.problems_per_group
+    results = sweep(settings, problems, seed, params, teacher, shape)
+    rows = [
+        {
+            "alpha": alpha,
+            "beta": beta,
+            "problems": stats.problems,
+            "trials_mean": stats.trials_mean,
+            "trials_sd": stats.trials_sd,
+            "trials_min": stats.trials_min,
+            "trials_max": stats.trials_max,
+            "problems_given_up": stats.problems_given_up,
+            "first_guess_correct_rate": stats.first_guess_correct_rate,
+            "perseverative_error_rate": stats.perseverative_error_rate,
+            "win_shift_rate": stats.win_shift_rate,
+            "final_entropy_mean": stats.final_entropy_mean,
+        }
+        for (alpha, beta), stats in zip(settings, results, strict=True)
+    ]
+    if arguments.json:
+        print(json.dumps([{**context, **row} for row in rows], allow_nan=False))
+        return 0
+    print(
+        f"pilot problems per setting: {problems} ({arguments.groups} groups), seed {seed}, "
+        f"gamma {params.gamma:g}, teacher {_teacher_text(teacher)}"
+    )
+    print(
+        f"{'alpha':>6} {'beta':>6} {'trials mean':>12} {'sd':>6} {'max':>4} {'given up':>9} "
+        f"{'persev/trial':>13} {'win-shift/trial':>16}"
+    )
+    for row in rows:
+        print(
+            f"{row['alpha']:>6g} {row['beta']:>6g} {_num(row['trials_mean'], 2):>12} "
+            f"{_num(row['trials_sd'], 2):>6} {_num(row['trials_max'], 0):>4} "
+            f"{row['problems_given_up']:>9} {_num(row['perseverative_error_rate'], 4):>13} "
+            f"{_num(row['win_shift_rate'], 4):>16}"
+        )
+    return 0
+
+
+def _stats_table(stats: StudyStats, context: dict[str, Any], n_toys: int, n_targets: int) -> str:
+    pilot = context["variant"] == "pilot"
+    paper = PAPER if pilot else {}
+    lines = [
+        f"{context['groups']} groups x {n_targets} problems ({context['variant']}, {n_toys} toys), "
+        f"seed {context['seed']}",
+        f"learner: {context['profile']} (alpha {context['alpha']:g}, beta {context['beta']:g}, "
+        f"gamma {context['gamma']:g}); teacher: {_teacher_text_from(context)}",
+        "",
+        f"{'':34} {'simulated':>16} {'paper' if pilot else '':>14}".rstrip(),
+    ]
+
+    def row(label: str, simulated: str, published: str = "") -> None:
+        lines.append(f"{label:34} {simulated:>16} {published if pilot else '':>14}".rstrip())
+
+    def with_rate(count: int, rate: float | None) -> str:
+        return f"{count} ({_num(None if rate is None else 100 * rate, 2)}%)"
+
+    trials = stats.trials_total
+    row(
+        "problems (learned)",
+        f"{stats.problems} ({stats.problems_learned})",
+        str(paper.get("problems", "")),
+    )
+    row("trials", str(trials), "202")
+    row(
+        "trials to learn, mean ± sd",
+        f"{_num(stats.trials_mean, 2)} ± {_num(stats.trials_sd, 2)}",
+        "4.21 ± 1.46",
+    )
+    row(
+        "trials to learn, min-max",
+        f"{_num(stats.trials_min, 0)}-{_num(stats.trials_max, 0)}",
+        "2-7",
+    )
+    row(
+        "given up / learned wrong",
+        f"{stats.problems_given_up} / {stats.problems_learned_wrong}",
+        "0 / 0",
+    )
+    row(
+        "first guess correct",
+        with_rate(stats.first_guess_correct, stats.first_guess_correct_rate),
+        "7 (14.58%)",
+    )
+    row(
+        "perseverative errors (per trial)",
+        with_rate(stats.perseverative_errors, stats.perseverative_error_rate),
+        "1 (0.50%)",
+    )
+    row("win-shifts (per trial)", with_rate(stats.win_shifts, stats.win_shift_rate), "1 (0.50%)")
+    row("initial entropy (bits)", _num(stats.initial_entropy, 3), "2.585")
+    row(
+        "final entropy, before last guess",
+        f"{_num(stats.final_entropy_mean, 2)} ± {_num(stats.final_entropy_sd, 2)}",
+        "0.73 ± 0.58",
+    )
+    row(
+        "final entropy, after last update",
+        f"{_num(stats.final_entropy_after_mean, 3)} ± {_num(stats.final_entropy_after_sd, 3)}",
+        "",
+    )
+    lines.append("")
+    lines.append("entropy before guess k (bits), problems with a k-th guess:")
+    for k, (entropy, n) in enumerate(
+        zip(stats.entropy_by_trial, stats.entropy_by_trial_n, strict=True), 1
+    ):
+        lines.append(f"  {k:>3}  {entropy:6.3f}  (n={n})")
+    return "\n".join(lines)
+
+
+def _teacher_text(teacher: Teacher) -> str:
+    if teacher.honest:
+        return "honest"
+    return (
+        f"wrong green {teacher.p_wrong_green:g}, wrong red {teacher.p_wrong_red:g}, "
+        f"no answer {teacher.p_no_answer:g}"
+    )
+
+
+def _teacher_text_from(context: dict[str, Any]) -> str:
+    return _teacher_text(
+        Teacher(context["p_wrong_green"], context["p_wrong_red"], context["p_no_answer"])
+    )
+
+
+def _num(value: float | None, decimals: int) -> str:
+    return "-" if value is None else f"{value:.{decimals}f}"
+
+
+@contextmanager
+def _progress(groups: int) -> Iterator[Callable[[int], None] | None]:
+    """A tqdm bar on stderr for long runs at a terminal; nothing otherwise (tqdm is optional)."""
+    if groups < PROGRESS_MIN_GROUPS or not sys.stderr.isatty():
+        yield None
+        return
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        yield None
+        return
+    with tqdm(total=groups, unit="group", file=sys.stderr, leave=False) as bar:
+        yield lambda _group: bar.update(1)
+
+
+# Option value types: argparse reports their ArgumentTypeError as
+# "argument --NAME: <message>", which names the option.
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, found {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, found {text!r}")
+    return value
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, found {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, found {text!r}")
+    return value
+
+
+def _float(text: str) -> float | None:
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
+def _finite_float(text: str) -> float:
+    value = _float(text)
+    if value is None:
+        raise argparse.ArgumentTypeError(f"expected a finite number, found {text!r}")
+    return value
+
+
+def _probability(text: str) -> float:
+    value = _float(text)
+    if value is None or not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a probability in [0, 1], found {text!r}")
+    return value
+
+
+def _sweep_range(text: str) -> tuple[str, list[float]]:
+    """NAME=START:STOP:STEP (inclusive) or NAME=VALUE, checked against the learner's limits."""
+    expected = f"expected NAME=START:STOP:STEP with NAME one of {', '.join(SWEEPABLE)}"
+    name, equals, spec = text.partition("=")
+    name = name.strip()
+    if not equals or name not in SWEEPABLE:
+        raise argparse.ArgumentTypeError(f"{expected}, found {text!r}")
+    parts = [_float(part) for part in spec.split(":")]
+    if len(parts) not in (1, 3) or any(part is None for part in parts):
+        raise argparse.ArgumentTypeError(f"{expected} (finite numbers), found {text!r}")
+    if len(parts) == 1:
+        values = [float(parts[0])]  # type: ignore[arg-type]
+    else:
+        start, stop, step = (float(part) for part in parts)  # type: ignore[arg-type]
+        if step <= 0.0 or stop < start:
+            raise argparse.ArgumentTypeError(
+                f"{expected} with STEP > 0 and STOP >= START, found {text!r}"
+            )
+        # The small allowance keeps STOP in the range despite decimal steps (0.1 * 9).
+        count = math.floor((stop - start) / step + 1e-9) + 1
+        if count > MAX_SWEEP_VALUES:
+            raise argparse.ArgumentTypeError(
+                f"expected at most {MAX_SWEEP_VALUES} values, found {count} in {text!r}"
+            )
+        # Rounded so that 0.1 + 2 * 0.1 prints and compares as 0.3.
+        values = [round(start + i * step, 12) for i in range(count)]
+    for value in values:
+        try:
+            LearnerParams(**{name: value})
+        except LearnerError as error:
+            raise argparse.ArgumentTypeError(f"{name}: {error} (in {text!r})") from None
+    return name, values

@@ -1,0 +1,121 @@
+"""kaspar.toml: every error names the file, the key, what was expected and what was found."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from kasparctl.cli import main
+from kasparctl.config import Config, ConfigError, load_config, parse_config
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLE = REPO / "systemd" / "kaspar.toml"
+
+
+def error_of(text: str) -> str:
+    with pytest.raises(ConfigError) as caught:
+        parse_config(text, "kaspar.toml")
+    return str(caught.value)
+
+
+def test_defaults_are_the_papers_learner_and_six_toys() -> None:
+    config = parse_config("", "kaspar.toml")
+    params = config.profile()
+    assert (params.alpha, params.beta, params.gamma) == (0.6, 8.0, 0.0)
+    assert (params.reward_green, params.reward_red, params.initial_q) == (1.0, -1.0, 0.0)
+    assert len(config.game.toys) == 6
+    assert config.game.correct_answers_to_learn == 2
+    assert config.game.targets == tuple(f"bag {n}" for n in range(1, 7))
+
+
+def test_example_configuration_loads_with_its_plans() -> None:
+    config = load_config(EXAMPLE)
+    assert [plan.group for plan in config.sessions] == ["A1", "A2"]
+    assert config.sessions[1].condition == "fast/silent"
+    assert config.group_size(config.sessions[0]) == 3
+    assert config.group_size(config.sessions[1]) == 2
+    assert config.profile("fast").alpha == 0.9
+
+
+def test_settings_are_frozen() -> None:
+    config = Config()
+    with pytest.raises(AttributeError):
+        config.language = "fr"  # type: ignore[misc]
+
+
+def test_relative_paths_are_relative_to_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "kaspar.toml"
+    path.write_text('state_dir = "state"\nphrases_dir = "my-phrases"\n')
+    config = load_config(path)
+    assert config.state_dir == str(tmp_path / "state")
+    assert config.phrases_dir == str(tmp_path / "my-phrases")
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ('[game]\nvariant = "maze"', "kaspar.toml: game.variant: expected one of 'names', 'pilot', found 'maze'"),
+        ("[game]\ntoyz = []", "kaspar.toml: game.toyz: unknown key; expected one of: variant, toys,"),
+        ("colour = 1", "kaspar.toml: colour: unknown key; expected one of: state_dir,"),
+        ('[game]\nchildren_per_group = "3"', "kaspar.toml: game.children_per_group: expected int, found str"),
+        ("[game]\nchildren_per_group = 9", "kaspar.toml: game.children_per_group: expected 1 to 6, found 9"),
+        ('[game]\ntoys = ["lion"]', "kaspar.toml: game.toys: expected at least 2 names, found 1"),
+        ('[game]\ntoys = ["lion", "lion"]', "kaspar.toml: game.toys: expected distinct names, found 'lion' more than once"),
+        ('[game]\ntoys = ["lion", " "]', "kaspar.toml: game.toys[1]: expected a name, found an empty string"),
+        ('[game]\ntoys = ["lion", 3]', "kaspar.toml: game.toys[1]: expected str, found int"),
+        ('[game]\nvariant = "pilot"', "kaspar.toml: game.locations: expected at least 1 names, found 0"),
+        ('[game]\nlocations = ["box"]', "kaspar.toml: game.locations: only the pilot variant uses locations"),
+        ("[game]\ncorrect_answers_to_learn = 0", "kaspar.toml: game.correct_answers_to_learn: expected >= 1, found 0"),
+        ("[game]\nmax_trials_per_target = 1", "kaspar.toml: game.max_trials_per_target: expected >= correct_answers_to_learn (2), found 1"),
+        ("[learner.profiles.quick]\nalpha = 1.5", "kaspar.toml: learner.profiles.quick.alpha: expected a number in (0, 1], found 1.5"),
+        ("[learner.profiles.quick]\nbeta = -1.0", "kaspar.toml: learner.profiles.quick.beta: expected a number >= 0, found -1.0"),
+        ("[learner.profiles.quick]\ngamma = 1.0", "kaspar.toml: learner.profiles.quick.gamma: expected a number in [0, 1), found 1.0"),
+        ("[learner.profiles.quick]\ninitial_q = nan", "kaspar.toml: learner.profiles.quick.initial_q: expected a finite number, found nan"),
+        ("[learner.profiles.quick]\nalfa = 0.5", "kaspar.toml: learner.profiles.quick.alfa: unknown key; expected one of: alpha, beta,"),
+        ('[learner]\ndefault_profile = "turbo"', "kaspar.toml: learner.default_profile: expected one of fast, paper, slow, found 'turbo'"),
+        ('[logging]\nlevel = "loud"', "kaspar.toml: logging.level: expected one of 'debug', 'info', 'warning', 'error', found 'loud'"),
+        ("[[sessions]]\nprofile = 'paper'", "kaspar.toml: sessions[0].group: required key is missing"),
+        ("[[sessions]]\ngroup = ''", "kaspar.toml: sessions[0].group: expected a group code, found an empty string"),
+        ("[[sessions]]\ngroup = 'A'\n[[sessions]]\ngroup = 'A'", "kaspar.toml: sessions[1].group: group code 'A' is planned twice"),
+        ("[[sessions]]\ngroup = 'A'\nprofile = 'turbo'", "kaspar.toml: sessions[0].profile: expected one of fast, paper, slow, found 'turbo'"),
+        ("[[sessions]]\ngroup = 'A'\nspeak_uncertainty = 'yes'", "kaspar.toml: sessions[0].speak_uncertainty: expected bool, found str"),
+        ("[[sessions]]\ngroup = 'A'\ngroup_size = 7", "kaspar.toml: sessions[0].group_size: expected 1 to 6, found 7"),
+        ("[[sessions]]\ngroup = 'A'\nchildren = ['Sam', 'Sam']", "kaspar.toml: sessions[0].children: expected distinct names, found 'Sam' more than once"),
+        ("[[sessions]]\ngroup = 'A'\nchildren = ['Sam']\ngroup_size = 2", "kaspar.toml: sessions[0].group_size: expected 1 (one per name in children), found 2"),
+        ("[[sessions]]\ngroup = 'A'\nanswer_key = ['lion']", "kaspar.toml: sessions[0].answer_key: expected 6 toys (one per target: bag 1,"),
+        (
+            "[[sessions]]\ngroup = 'A'\nanswer_key = ['lion', 'elephant', 'giraffe', 'monkey', 'zebra', 'snake']",
+            "kaspar.toml: sessions[0].answer_key[5]: expected one of game.toys (lion, elephant, giraffe, monkey, zebra, crocodile), found 'snake'",
+        ),
+        ("[game\n", "kaspar.toml: (syntax): not valid TOML:"),
+    ],
+)
+def test_every_error_names_file_key_expected_and_found(text: str, expected: str) -> None:
+    assert error_of(text).startswith(expected)
+
+
+def test_error_carries_its_parts() -> None:
+    with pytest.raises(ConfigError) as caught:
+        parse_config("[game]\nchildren_per_group = 0", "robot.toml")
+    assert (caught.value.source, caught.value.key) == ("robot.toml", "game.children_per_group")
+
+
+def test_pilot_targets_are_its_locations() -> None:
+    config = parse_config('[game]\nvariant = "pilot"\nlocations = ["box", "shelf", "basket"]', "k.toml")
+    assert config.game.targets == ("box", "shelf", "basket")
+    assert not config.game.exclude_learned
+
+
+def test_missing_file_is_named(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"nowhere\.toml: \(file\): cannot read it: No such file"):
+        load_config(tmp_path / "nowhere.toml")
+
+
+def test_check_command_exit_codes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", "--config", str(EXAMPLE)]) == 0
+    assert "ok:" in capsys.readouterr().out
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[game]\nvariant = 'maze'\n")
+    assert main(["check", "--config", str(bad)]) == 1
+    assert f"{bad}: game.variant: expected one of" in capsys.readouterr().err
