@@ -61,10 +61,11 @@ class ScaledTimeLoop(asyncio.SelectorEventLoop):
     """The clock runs `speed` times faster than the wall clock."""
 
     def __init__(self, speed: float) -> None:
-        if not speed > 0.0:
-            raise ValueError(f"speed: expected a number > 0, found {speed!r}")
         selector = _JumpingSelector()
         super().__init__(selector)
+        if not speed > 0.0:
+            self.close()
+            raise ValueError(f"speed: expected a number > 0, found {speed!r}")
         self._speed = speed
         self._start = time.monotonic()
         self._skipped = 0.0
