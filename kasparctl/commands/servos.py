@@ -1,9 +1,166 @@
-"""`kasparctl servos`: being built (owned by the servos work in progress)."""
+"""`kasparctl servos`: find servos on a bus, and read every configured joint."""
 
 from __future__ import annotations
 
+import argparse
+import asyncio
+import json
+import sys
 from typing import Any
+
+from hal.bus import SerialBus
+from hal.clock import MonotonicClock
+from hal.errors import BusError
+from hal.joints import Joints
+from hal.servo_drivers import DRIVERS
+from hal.servo_settings import BAUD_RATES, model_named
+from hal.sim_servos import SimServos
+from kasparctl.config import ConfigError, load_config
+from kasparctl.log import configure_logging
+
+DEFAULT_IDS = {"dynamixel1": "1-30", "dynamixel2": "1-30", "herkulex": "0-30", "maestro": "0-11"}
 
 
 def register(subparsers: Any) -> None:
-    del subparsers
+    parser = subparsers.add_parser("servos", help="scan a servo bus or read the configured joints")
+    commands = parser.add_subparsers(dest="servos_command", metavar="ACTION", required=True)
+
+    scan = commands.add_parser("scan", help="list the servos answering on one port")
+    scan.add_argument("--port", required=True, help="serial device, e.g. /dev/ttyUSB0")
+    scan.add_argument("--protocol", required=True, choices=sorted(DRIVERS))
+    scan.add_argument("--baud", type=int, default=57600, choices=BAUD_RATES, metavar="BAUD")
+    scan.add_argument(
+        "--ids",
+        type=parse_ids,
+        default=None,
+        help="ids (channels on a Maestro) to try, e.g. 1-20 or 1,3,5 (default: "
+        + ", ".join(f"{k} {v}" for k, v in DEFAULT_IDS.items())
+        + ")",
+    )
+    scan.add_argument(
+        "--margin-ms",
+        type=float,
+        default=20.0,
+        help="reply time allowed beyond the wire time (default 20)",
+    )
+    scan.add_argument(
+        "--json", action="store_true", help="print a JSON list of {id, model, position}"
+    )
+    scan.set_defaults(run=run_scan)
+
+    read = commands.add_parser("read", help="print every configured joint: degrees and status")
+    read.add_argument("--config", required=True, help="kaspar.toml")
+    read.add_argument("--json", action="store_true", help="print a JSON list, one object per joint")
+    read.set_defaults(run=run_read)
+
+
+def parse_ids(text: str) -> list[int]:
+    ids: list[int] = []
+    try:
+        for part in text.split(","):
+            low, _, high = part.strip().partition("-")
+            ids.extend(range(int(low), int(high or low) + 1))
+    except ValueError:
+        message = f"expected ids like 1-20 or 1,3,5, found {text!r}"
+        raise argparse.ArgumentTypeError(message) from None
+    if not ids or min(ids) < 0 or max(ids) > 253:
+        raise argparse.ArgumentTypeError(f"ids must be within 0-253, found {text!r}")
+    return sorted(set(ids))
+
+
+async def scan(port: str, protocol: str, baud: int, ids: list[int], margin: float) -> list[dict]:
+    # No retries: a missing id costs one timeout, and most ids are missing.
+    bus = SerialBus("scan", port, baud, timeout_margin=margin, retries=0)
+    driver = DRIVERS[protocol](bus)
+    await driver.start()
+    found = []
+    try:
+        if not bus.connected:
+            raise BusError(f"cannot open {port}")
+        for servo_id in ids:
+            model_number = await driver.ping(servo_id)
+            if model_number is None:
+                continue
+            position = (await driver.read_positions([servo_id]))[servo_id]
+            name = model_named(model_number, protocol) or (
+                "maestro" if protocol == "maestro" else f"model {model_number}"
+            )
+            found.append(
+                {"id": servo_id, "model": name, "model_number": model_number, "position": position}
+            )
+    finally:
+        await driver.close()
+    return found
+
+
+def _quiet_logging() -> None:
+    # stdout is the command's answer (maybe JSON for a script): the HAL's log goes to stderr.
+    configure_logging("warning", "console", stream=sys.stderr)
+
+
+def run_scan(arguments: argparse.Namespace) -> int:
+    _quiet_logging()
+    ids = arguments.ids or parse_ids(DEFAULT_IDS[arguments.protocol])
+    try:
+        margin = arguments.margin_ms / 1000
+        found = asyncio.run(scan(arguments.port, arguments.protocol, arguments.baud, ids, margin))
+    except BusError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    if arguments.json:
+        print(json.dumps(found))
+    elif not found:
+        where = f"{arguments.port} ({arguments.protocol}, {arguments.baud} baud)"
+        print(f"no servo answered on {where}")
+    else:
+        for servo in found:
+            print(f"id {servo['id']:3d}  {servo['model']:<12} position {servo['position']}")
+    return 0 if found else 1
+
+
+async def read_joints(config_path: str) -> list[dict]:
+    config = load_config(config_path)
+    settings, clock = config.servos, MonotonicClock()
+    joints = (
+        Joints.from_settings(settings, clock)
+        if settings.backend == "real"
+        else SimServos(settings, clock)
+    )
+    await joints.start(poll=False, read=False)
+    try:
+        statuses = await joints.survey()
+    finally:
+        await joints.close()
+    by_name = {j.name: j for j in settings.joints}
+    return [
+        {
+            "joint": s.joint,
+            "bus": by_name[s.joint].bus,
+            "id": by_name[s.joint].id,
+            "position_deg": None if s.position_deg is None else round(s.position_deg, 1),
+            "temperature_c": s.temperature_c,
+            "voltage_v": None if s.voltage_v is None else round(s.voltage_v, 1),
+            "status": "ok" if s.fault is None else f"{s.fault.kind.value}: {s.fault.detail}",
+        }
+        for s in statuses
+    ]
+
+
+def run_read(arguments: argparse.Namespace) -> int:
+    _quiet_logging()
+    try:
+        rows = asyncio.run(read_joints(arguments.config))
+    except ConfigError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    if arguments.json:
+        print(json.dumps(rows))
+    else:
+        for row in rows:
+            position = "   --  " if row["position_deg"] is None else f"{row['position_deg']:7.1f}"
+            temperature = "" if row["temperature_c"] is None else f"{row['temperature_c']:.0f} C"
+            print(
+                f"{row['joint']:<16} {row['bus']:<8} id {row['id']:3d} {position} deg "
+                f"{temperature:>5}  {row['status']}"
+            )
+    return 0 if all(row["status"] == "ok" for row in rows) else 1

@@ -1,0 +1,387 @@
+"""One owner per serial port: a thread that holds the port, bounded I/O, reconnect.
+
+The event loop never touches the port. It submits a transaction (bytes out,
+how many reply packets to read and how to frame and decode them) and awaits a
+future; the bus thread does the blocking I/O. Reads wait in select() with the
+transaction's deadline, never spinning. A timeout, a framing error or a reply
+that fails its decoder is retried a bounded number of times. If the adapter
+vanishes (EIO, SerialException) every pending and new transaction fails with
+PortUnavailable while the thread reopens the port with exponential backoff;
+when it is back the bus carries on, no restart needed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import enum
+import os
+import queue
+import select
+import termios
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+import serial
+import structlog
+
+from hal.errors import BusClosed, BusTimeout, CodecError, PortUnavailable, RepeatFilter
+
+log = structlog.get_logger("hal.bus")
+
+T = TypeVar("T")
+
+BITS_PER_BYTE = 10  # start + 8 data + stop
+
+
+def wire_time(n_bytes: int, baud: int) -> float:
+    """Seconds that `n_bytes` take on the wire at `baud`."""
+    return n_bytes * BITS_PER_BYTE / baud
+
+
+@dataclass(frozen=True, slots=True)
+class Framing:
+    """How to cut a protocol's replies out of the byte stream."""
+
+    head_size: int  # bytes needed before the total length is known
+    length: Callable[[bytes], int]  # total packet length from its head; raises a CodecError
+
+
+class BusState(enum.Enum):
+    CONNECTED = "connected"
+    DISCONNECTED = "disconnected"
+    CLOSED = "closed"
+
+
+@dataclass
+class BusStats:
+    transactions: int = 0
+    bytes_out: int = 0
+    bytes_in: int = 0
+    retries: int = 0
+    timeouts: int = 0
+    disconnects: int = 0
+    reconnects: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Exchange:
+    """One request and the replies it expects, for SerialBus.exchange_all."""
+
+    request: bytes
+    replies: int = 0
+    framing: Framing | None = None
+    decode: Callable[[list[bytes]], Any] | None = None
+    expect: int = 0  # reply bytes expected in all, for the deadline
+
+
+@dataclass(eq=False)
+class _Job:
+    exchanges: list[Exchange]
+    batch: bool  # resolve with the list of outcomes rather than the single result
+    future: asyncio.Future[Any]
+    loop: asyncio.AbstractEventLoop
+
+    def resolve(self, result: Any = None, error: BaseException | None = None) -> None:
+        def settle() -> None:
+            if self.future.done():  # the caller gave up (watchdog) or was cancelled
+                return
+            if error is not None:
+                self.future.set_exception(error)
+            else:
+                self.future.set_result(result)
+
+        with contextlib.suppress(RuntimeError):  # the loop has closed: nobody is waiting
+            self.loop.call_soon_threadsafe(settle)
+
+
+_STOP = object()
+
+
+@dataclass
+class SerialBus:
+    """Owns one serial port. Create, `await start()`, `await transact(...)`, `await close()`."""
+
+    name: str
+    port: str
+    baud: int
+    timeout_margin: float = 0.02
+    retries: int = 2
+    backoff_initial: float = 0.05
+    backoff_max: float = 2.0
+    on_state: Callable[[BusState], None] | None = None
+    stats: BusStats = field(default_factory=BusStats)
+
+    def __post_init__(self) -> None:
+        self._jobs: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._serial: serial.Serial | None = None
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._state = BusState.DISCONNECTED
+        self._state_changed: asyncio.Event | None = None
+        self._backoff = self.backoff_initial
+        self._next_open = 0.0
+        self._repeats = RepeatFilter()
+        self._log = log.bind(bus=self.name, port=self.port)
+
+    # --- event-loop side ----------------------------------------------------------------
+
+    @property
+    def state(self) -> BusState:
+        return self._state
+
+    @property
+    def connected(self) -> bool:
+        return self._state is BusState.CONNECTED
+
+    async def start(self) -> None:
+        """Start the owner thread; it opens the port (now, or as soon as it appears)."""
+        if self._thread is not None:
+            return
+        self._loop = asyncio.get_running_loop()
+        self._state_changed = asyncio.Event()
+        self._thread = threading.Thread(target=self._run, name=f"bus {self.name}", daemon=True)
+        self._thread.start()
+        # Give the first open a chance so that a plugged-in bus starts connected.
+        await self.wait_state(BusState.CONNECTED, timeout=1.0)
+
+    async def wait_state(self, state: BusState, timeout: float) -> bool:
+        """Wait until the bus is in `state`; False if `timeout` passed first."""
+        assert self._state_changed is not None, "start() the bus first"
+        deadline = time.monotonic() + timeout
+        while self._state is not state:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False
+            self._state_changed.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._state_changed.wait(), remaining)
+        return True
+
+    def transaction_timeout(self, request_bytes: int, reply_bytes: int, replies: int) -> float:
+        """Deadline for one attempt: wire time both ways, plus the margin per reply."""
+        return wire_time(request_bytes + reply_bytes, self.baud) + self.timeout_margin * max(
+            1, replies
+        )
+
+    async def transact(
+        self,
+        request: bytes,
+        replies: int = 0,
+        framing: Framing | None = None,
+        decode: Callable[[list[bytes]], T] | None = None,
+        expect: int = 0,
+    ) -> T | list[bytes]:
+        """Send `request`, read `replies` packets (framed by `framing`) and decode them.
+
+        `expect` is the number of reply bytes expected in all (for the deadline);
+        `decode` turns the packets into the result and raises a CodecError for a
+        reply that must be retried (corrupt, wrong id). Raises BusTimeout after the
+        retries, PortUnavailable while the adapter is away, BusClosed after close().
+        """
+        outcome = await self._submit([Exchange(request, replies, framing, decode, expect)], False)
+        return outcome  # type: ignore[no-any-return]
+
+    async def exchange_all(self, exchanges: Sequence[Exchange]) -> list[Any]:
+        """Run `exchanges` back to back on the bus thread, with a single hand-off.
+
+        Reading 17 AX-12s one READ at a time is 17 transactions; handing each to the
+        thread separately would cost more than the wire. Each outcome is the decoded
+        result or the exception that ended that exchange (BusTimeout, CodecError);
+        once the port is lost the rest are PortUnavailable.
+        """
+        return await self._submit(list(exchanges), True)  # type: ignore[no-any-return]
+
+    async def _submit(self, exchanges: list[Exchange], batch: bool) -> Any:
+        if self._state is BusState.CLOSED or self._loop is None:
+            raise BusClosed(f"bus {self.name} is not running")
+        if any(e.replies and e.framing is None for e in exchanges):
+            raise ValueError("replies need a framing")
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[Any] = loop.create_future()
+        self._jobs.put(_Job(exchanges, batch, future, loop))
+        attempts = sum(
+            self.transaction_timeout(len(e.request), e.expect, e.replies) + 0.01 for e in exchanges
+        )
+        # A watchdog far beyond the thread's own deadlines: it only fires if the thread is stuck.
+        watchdog = attempts * (self.retries + 1) + 5.0
+        try:
+            return await asyncio.wait_for(future, watchdog)
+        except TimeoutError:
+            raise BusTimeout(f"bus {self.name}: the bus thread did not answer") from None
+
+    async def close(self) -> None:
+        if self._thread is None:
+            self._state = BusState.CLOSED
+            return
+        self._jobs.put(_STOP)
+        await asyncio.to_thread(self._thread.join, 5.0)
+        self._thread = None
+        self._set_state(BusState.CLOSED)
+
+    # --- owner-thread side --------------------------------------------------------------
+
+    def _set_state(self, state: BusState) -> None:
+        if state is self._state:
+            return
+        self._state = state
+
+        def notify() -> None:
+            if self._state_changed is not None:
+                self._state_changed.set()
+            if self.on_state is not None:
+                self.on_state(state)
+
+        if self._loop is not None:
+            with contextlib.suppress(RuntimeError):
+                self._loop.call_soon_threadsafe(notify)
+
+    def _run(self) -> None:
+        try:
+            while True:
+                if self._serial is None:
+                    self._try_open()
+                wait = None
+                if self._serial is None:
+                    wait = max(0.0, self._next_open - time.monotonic())
+                try:
+                    job = self._jobs.get(timeout=wait)
+                except queue.Empty:
+                    continue
+                if job is _STOP:
+                    break
+                if self._serial is None:
+                    message = f"bus {self.name}: {self.port} is not available"
+                    job.resolve(error=PortUnavailable(message))
+                    continue
+                self._execute(job)
+        finally:
+            self._drop_port()
+            while True:
+                try:
+                    job = self._jobs.get_nowait()
+                except queue.Empty:
+                    break
+                if job is not _STOP:
+                    job.resolve(error=BusClosed(f"bus {self.name} closed"))
+
+    def _try_open(self) -> None:
+        if time.monotonic() < self._next_open:
+            return
+        try:
+            port = serial.Serial(self.port, self.baud, timeout=0, write_timeout=1.0, exclusive=True)
+        except (serial.SerialException, OSError, ValueError) as error:
+            if self._repeats.first("open", str(error)):
+                self._log.warning("serial port cannot be opened; retrying", error=str(error))
+            self._next_open = time.monotonic() + self._backoff
+            self._backoff = min(self._backoff * 2, self.backoff_max)
+            return
+        self._request_low_latency(port)
+        repeated = self._repeats.end("open")
+        if self.stats.disconnects:
+            self.stats.reconnects += 1
+        self._log.info(
+            "serial port open",
+            baud=self.baud,
+            failed_attempts=repeated[1] if repeated else 0,
+        )
+        self._serial = port
+        self._backoff = self.backoff_initial
+        self._set_state(BusState.CONNECTED)
+
+    def _request_low_latency(self, port: serial.Serial) -> None:
+        # ASYNC_LOW_LATENCY makes the kernel push received bytes at once; ftdi_sio
+        # also maps it to a 1 ms latency timer. A pty does not support it.
+        try:
+            port.set_low_latency_mode(True)
+        except (OSError, ValueError, AttributeError, serial.SerialException) as error:
+            if self._repeats.first("low-latency", str(error)):
+                self._log.info("low-latency mode not available on this port", error=str(error))
+
+    def _drop_port(self) -> None:
+        if self._serial is not None:
+            with contextlib.suppress(Exception):
+                self._serial.close()
+            self._serial = None
+
+    def _lost(self, error: BaseException) -> None:
+        self.stats.disconnects += 1
+        self._log.error("serial port lost; reopening with backoff", error=str(error))
+        self._drop_port()
+        self._next_open = time.monotonic() + self._backoff
+        self._set_state(BusState.DISCONNECTED)
+
+    def _execute(self, job: _Job) -> None:
+        outcomes: list[Any] = []
+        for exchange in job.exchanges:
+            if self._serial is None:  # lost during this batch
+                outcomes.append(PortUnavailable(f"bus {self.name}: {self.port} is not available"))
+                continue
+            try:
+                outcomes.append(self._attempt(exchange))
+            except Exception as error:  # every outcome is reported to the caller, none dropped
+                outcomes.append(error)
+        if job.batch:
+            job.resolve(outcomes)
+        elif isinstance(outcomes[0], Exception):
+            job.resolve(error=outcomes[0])
+        else:
+            job.resolve(outcomes[0])
+
+    def _attempt(self, exchange: Exchange) -> Any:
+        """One exchange with its retries; raises what ended it."""
+        assert self._serial is not None
+        self.stats.transactions += 1
+        timeout = self.transaction_timeout(len(exchange.request), exchange.expect, exchange.replies)
+        last: Exception | None = None
+        for attempt in range(self.retries + 1):
+            if attempt:
+                self.stats.retries += 1
+            try:
+                self._serial.reset_input_buffer()
+                self._serial.write(exchange.request)
+                self.stats.bytes_out += len(exchange.request)
+                deadline = time.monotonic() + timeout
+                packets = [
+                    self._read_packet(exchange.framing, deadline)  # type: ignore[arg-type]
+                    for _ in range(exchange.replies)
+                ]
+                if exchange.decode is None:
+                    return packets
+                return exchange.decode(packets)
+            except (serial.SerialException, OSError, termios.error) as error:
+                self._lost(error)
+                raise PortUnavailable(f"bus {self.name}: {error}") from None
+            except (BusTimeout, CodecError) as error:
+                last = error
+        if isinstance(last, BusTimeout):
+            self.stats.timeouts += 1
+            raise BusTimeout(f"bus {self.name}: {last} (after {self.retries} retries)")
+        assert last is not None
+        raise last
+
+    def _read_packet(self, framing: Framing, deadline: float) -> bytes:
+        head = self._read_exact(framing.head_size, deadline)
+        total = framing.length(head)
+        return head + self._read_exact(total - framing.head_size, deadline)
+
+    def _read_exact(self, count: int, deadline: float) -> bytes:
+        assert self._serial is not None
+        fd = self._serial.fileno()
+        data = b""
+        while len(data) < count:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise BusTimeout(f"{len(data)} of {count} reply bytes before the deadline")
+            ready, _, _ = select.select([fd], [], [], remaining)
+            if not ready:
+                continue
+            chunk = os.read(fd, count - len(data))
+            if not chunk:  # readable yet empty: the device has gone (pty hang-up, USB unplug)
+                raise serial.SerialException("readable but no data: the device has gone")
+            data += chunk
+            self.stats.bytes_in += len(chunk)
+        return data

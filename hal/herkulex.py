@@ -1,0 +1,288 @@
+"""HerkuleX (DRS-0101/0201) packets: pure functions, no I/O.
+
+Packet: FF FF SIZE ID CMD CS1 CS2 DATA..., SIZE counts every byte,
+CS1 = (SIZE ^ ID ^ CMD ^ each DATA byte) & 0xFE, CS2 = ~CS1 & 0xFE
+(HerkuleX manual v1.1, section 4-1). A reply (ACK) has CMD | 0x40 and ends
+with the status error and status detail bytes.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from hal.errors import CodecError
+
+HEADER = b"\xff\xff"
+BROADCAST_ID = 0xFE
+MAX_ID = 0xFD
+HEAD_SIZE = 3  # FF FF SIZE
+MIN_SIZE = 7
+MAX_SIZE = 223
+ACK_FLAG = 0x40
+PLAYTIME_SECONDS = 0.0112  # one play-time unit (DRS-0101)
+
+
+class HerkulexError(CodecError):
+    """A HerkuleX packet that cannot be built or decoded."""
+
+
+class Command(enum.IntEnum):
+    EEP_WRITE = 0x01
+    EEP_READ = 0x02
+    RAM_WRITE = 0x03
+    RAM_READ = 0x04
+    I_JOG = 0x05
+    S_JOG = 0x06
+    STAT = 0x07
+    ROLLBACK = 0x08
+    REBOOT = 0x09
+
+
+class Ram(enum.IntEnum):
+    """Volatile register map addresses (DRS-0101)."""
+
+    ID = 0
+    ACK_POLICY = 1
+    ALARM_LED_POLICY = 2
+    TORQUE_POLICY = 3
+    MAX_TEMPERATURE = 5
+    MIN_VOLTAGE = 6
+    MAX_VOLTAGE = 7
+    STATUS_ERROR = 48
+    STATUS_DETAIL = 49
+    TORQUE_CONTROL = 52
+    LED_CONTROL = 53
+    VOLTAGE = 54
+    TEMPERATURE = 55
+    CURRENT_CONTROL_MODE = 56
+    TICK = 57
+    CALIBRATED_POSITION = 58
+    ABSOLUTE_POSITION = 60
+    DIFFERENTIAL_POSITION = 62
+    PWM = 64
+    ABSOLUTE_GOAL_POSITION = 68
+    ABSOLUTE_DESIRED_TRAJECTORY = 70
+    DESIRED_VELOCITY = 72
+    RAM_SIZE = 74
+
+
+class Eep(enum.IntEnum):
+    MODEL_NO_1 = 0
+    MODEL_NO_2 = 1
+    VERSION_1 = 2
+    VERSION_2 = 3
+    BAUD_RATE = 4
+    ID = 6
+    ACK_POLICY = 7
+
+
+class TorqueControl(enum.IntEnum):
+    FREE = 0x00
+    BRAKE = 0x40
+    ON = 0x60
+
+
+class AckPolicy(enum.IntEnum):
+    NEVER = 0
+    READS_ONLY = 1  # the factory default: only RAM/EEP_READ and STAT answer
+    ALWAYS = 2
+
+
+class StatusError(enum.IntFlag):
+    EXCEED_INPUT_VOLTAGE = 0x01
+    EXCEED_POT_LIMIT = 0x02
+    EXCEED_TEMPERATURE = 0x04
+    INVALID_PACKET = 0x08
+    OVERLOAD = 0x10
+    DRIVER_FAULT = 0x20
+    EEP_DISTORTED = 0x40
+
+
+class StatusDetail(enum.IntFlag):
+    MOVING = 0x01
+    INPOSITION = 0x02
+    CHECKSUM_ERROR = 0x04
+    UNKNOWN_COMMAND = 0x08
+    EXCEED_REG_RANGE = 0x10
+    GARBAGE = 0x20
+    MOTOR_ON = 0x40
+
+
+class JogSet(enum.IntFlag):
+    """The SET byte of a JOG entry: position mode unless CONTINUOUS."""
+
+    STOP = 0x01
+    CONTINUOUS = 0x02
+    GREEN = 0x04
+    BLUE = 0x08
+    RED = 0x10
+    INVALID = 0x20
+
+
+@dataclass(frozen=True, slots=True)
+class Packet:
+    servo_id: int
+    command: int
+    data: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class Ack:
+    servo_id: int
+    command: Command
+    data: bytes  # between the checksums and the two status bytes
+    status_error: StatusError
+    status_detail: StatusDetail
+
+    def read_value(self) -> tuple[int, bytes]:
+        """(address, bytes) of a RAM_READ or EEP_READ reply."""
+        if len(self.data) < 2 or len(self.data) != 2 + self.data[1]:
+            raise HerkulexError(f"read reply with malformed data {self.data.hex(' ')}")
+        return self.data[0], self.data[2:]
+
+
+def checksums(size: int, servo_id: int, command: int, data: bytes) -> tuple[int, int]:
+    cs1 = size ^ servo_id ^ command
+    for byte in data:
+        cs1 ^= byte
+    cs1 &= 0xFE
+    return cs1, ~cs1 & 0xFE
+
+
+def _check(name: str, value: int, highest: int) -> None:
+    if not 0 <= value <= highest:
+        raise HerkulexError(f"{name} {value} outside 0..{highest}")
+
+
+def packet(servo_id: int, command: int, data: bytes = b"") -> bytes:
+    _check("servo id", servo_id, BROADCAST_ID)
+    _check("command", command, 0xFF)
+    size = MIN_SIZE + len(data)
+    if size > MAX_SIZE:
+        raise HerkulexError(f"packet of {size} bytes exceeds the {MAX_SIZE}-byte maximum")
+    cs1, cs2 = checksums(size, servo_id, command, data)
+    return HEADER + bytes((size, servo_id, command, cs1, cs2)) + data
+
+
+def _read(command: Command, servo_id: int, address: int, length: int) -> bytes:
+    _check("address", address, 0xFF)
+    _check("length", length, 0xFF)
+    return packet(servo_id, command, bytes((address, length)))
+
+
+def _write(command: Command, servo_id: int, address: int, data: bytes) -> bytes:
+    _check("address", address, 0xFF)
+    _check("data length", len(data), MAX_SIZE - MIN_SIZE - 2)
+    return packet(servo_id, command, bytes((address, len(data))) + data)
+
+
+def ram_read(servo_id: int, address: int, length: int) -> bytes:
+    return _read(Command.RAM_READ, servo_id, address, length)
+
+
+def ram_write(servo_id: int, address: int, data: bytes) -> bytes:
+    return _write(Command.RAM_WRITE, servo_id, address, data)
+
+
+def eep_read(servo_id: int, address: int, length: int) -> bytes:
+    return _read(Command.EEP_READ, servo_id, address, length)
+
+
+def eep_write(servo_id: int, address: int, data: bytes) -> bytes:
+    return _write(Command.EEP_WRITE, servo_id, address, data)
+
+
+def stat(servo_id: int) -> bytes:
+    return packet(servo_id, Command.STAT)
+
+
+def reboot(servo_id: int) -> bytes:
+    return packet(servo_id, Command.REBOOT)
+
+
+def rollback(servo_id: int, keep_id: bool = True, keep_baud: bool = True) -> bytes:
+    return packet(servo_id, Command.ROLLBACK, bytes((int(keep_id), int(keep_baud))))
+
+
+def _jog(position: int, flags: int) -> bytes:
+    _check("position", position, 0x7FFF)
+    _check("set", flags, 0xFF)
+    return bytes((position & 0xFF, position >> 8, flags))
+
+
+def s_jog(playtime: int, moves: Sequence[tuple[int, int, int]]) -> bytes:
+    """S_JOG: every (id, position, set) move shares one play time (units of 11.2 ms)."""
+    _check("play time", playtime, 0xFF)
+    data = bytearray((playtime,))
+    for servo_id, position, flags in moves:
+        _check("servo id", servo_id, MAX_ID)
+        data += _jog(position, flags) + bytes((servo_id,))
+    return packet(BROADCAST_ID, Command.S_JOG, bytes(data))
+
+
+def i_jog(moves: Sequence[tuple[int, int, int, int]]) -> bytes:
+    """I_JOG: each (id, position, set, play time) move has its own play time."""
+    data = bytearray()
+    for servo_id, position, flags, playtime in moves:
+        _check("servo id", servo_id, MAX_ID)
+        _check("play time", playtime, 0xFF)
+        data += _jog(position, flags) + bytes((servo_id, playtime))
+    return packet(BROADCAST_ID, Command.I_JOG, bytes(data))
+
+
+def ack(servo_id: int, command: int, data: bytes, status_error: int, status_detail: int) -> bytes:
+    """A reply as a servo sends it (for emulators and round-trip tests)."""
+    _check("status error", status_error, 0xFF)
+    _check("status detail", status_detail, 0xFF)
+    return packet(servo_id, command | ACK_FLAG, data + bytes((status_error, status_detail)))
+
+
+def packet_length(head: bytes) -> int:
+    if len(head) < HEAD_SIZE or head[:2] != HEADER:
+        raise HerkulexError(f"not a HerkuleX header: {head[:HEAD_SIZE].hex(' ')}")
+    if not MIN_SIZE <= head[2] <= MAX_SIZE:
+        raise HerkulexError(f"packet size {head[2]} outside {MIN_SIZE}..{MAX_SIZE}")
+    return head[2]
+
+
+def decode_packet(raw: bytes) -> Packet:
+    size = packet_length(raw)
+    if len(raw) != size:
+        raise HerkulexError(f"packet of {len(raw)} bytes, its size byte says {size}")
+    servo_id, command, cs1, cs2 = raw[3], raw[4], raw[5], raw[6]
+    data = raw[7:]
+    if (cs1, cs2) != checksums(size, servo_id, command, data):
+        raise HerkulexError(f"bad checksums in {raw.hex(' ')}")
+    if servo_id > BROADCAST_ID:
+        raise HerkulexError(f"servo id {servo_id} is not valid")
+    return Packet(servo_id, command, data)
+
+
+def decode_ack(raw: bytes) -> Ack:
+    decoded = decode_packet(raw)
+    if not decoded.command & ACK_FLAG:
+        raise HerkulexError(f"command {decoded.command:#04x} is not a reply")
+    try:
+        command = Command(decoded.command & ~ACK_FLAG)
+    except ValueError:
+        raise HerkulexError(f"reply to unknown command {decoded.command:#04x}") from None
+    if len(decoded.data) < 2 or decoded.servo_id > MAX_ID:
+        raise HerkulexError(f"reply without status bytes or from id {decoded.servo_id}")
+    return Ack(
+        decoded.servo_id,
+        command,
+        decoded.data[:-2],
+        StatusError(decoded.data[-2] & 0x7F),
+        StatusDetail(decoded.data[-1] & 0x7F),
+    )
+
+
+def u16(data: bytes, offset: int = 0) -> int:
+    return data[offset] | data[offset + 1] << 8
+
+
+def le16(value: int) -> bytes:
+    _check("value", value, 0xFFFF)
+    return bytes((value & 0xFF, value >> 8))

@@ -1,0 +1,486 @@
+"""Named joints over the bus drivers: limits, offsets, groups, safe moves, latched faults.
+
+Safety rules, enforced here whatever a pose file or a caller says:
+- every goal is clamped to the joint's safe range, and each clamp is logged;
+- no goal step exceeds the joint's speed limit (the profile is planned so that
+  its steepest step is within the limit, and late steps do not catch up);
+- torque goes on only after the goal has been set to the present position,
+  and not at all for a joint found outside its range (it stays limp);
+- a servo that overheats, is overloaded, has a bad supply or stops answering
+  latches a fault naming the joint; the faulty servo is freed and the
+  configured safe action (hold or torque_off) is applied to the rest;
+- while a fault is latched every motion is refused until clear_faults();
+- the same error repeating is logged once, then once with its count when it ends.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+from collections.abc import Awaitable, Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import TypeVar
+
+import structlog
+
+from hal.clock import Clock
+from hal.errors import (
+    BusError,
+    PortUnavailable,
+    RepeatFilter,
+    ServoFaultError,
+    ServoSilent,
+    UnsafeCommand,
+)
+from hal.servo_api import Fault, FaultKind, JointStatus, Pose, ServoDriver
+from hal.servo_settings import JointSettings, ServoSettings
+
+log = structlog.get_logger("hal.joints")
+
+T = TypeVar("T")
+
+# A joint pushed this far outside its range by hand is not grabbed back by torque-on.
+RANGE_TOLERANCE_DEG = 2.0
+# The motion profile's steepest slope relative to a constant-speed move (smoothstep).
+PROFILE_PEAK = 1.5
+
+
+def smoothstep(t: float) -> float:
+    """Eases in and out: gentler on the gears and on the child beside the arm."""
+    return t * t * (3.0 - 2.0 * t)
+
+
+@dataclass
+class _Joint:
+    settings: JointSettings
+    driver: ServoDriver
+    commanded: float | None = None  # the last goal sent, in degrees
+    present: float | None = None
+    torque: bool | None = None  # None until we have set it
+
+    @property
+    def name(self) -> str:
+        return self.settings.name
+
+    @property
+    def servo_id(self) -> int:
+        return self.settings.id
+
+    def clamp(self, degrees: float) -> float:
+        low, high = self.settings.range_deg
+        return min(high, max(low, degrees))
+
+    def to_raw(self, degrees: float) -> int:
+        s = self.settings
+        return s.servo.to_raw(self.clamp(degrees), s.direction, s.offset_deg)
+
+    def to_degrees(self, raw: int) -> float:
+        s = self.settings
+        return s.servo.to_degrees(raw, s.direction, s.offset_deg)
+
+
+class Joints:
+    """The ServoApi over real (or simulated) bus drivers."""
+
+    def __init__(
+        self,
+        settings: ServoSettings,
+        drivers: Mapping[str, ServoDriver],
+        clock: Clock,
+    ) -> None:
+        self.settings = settings
+        self.clock = clock
+        self._drivers = dict(drivers)
+        self._joints = {j.name: _Joint(j, self._drivers[j.bus]) for j in settings.joints}
+        self._groups = settings.groups
+        self._faults: list[Fault] = []
+        self._fault_listeners: list[Callable[[Fault], None]] = []
+        self._motion = asyncio.Lock()
+        self._repeats = RepeatFilter()
+        self._poll_task: asyncio.Task[None] | None = None
+        self._last_status: dict[str, JointStatus] = {}
+        self.step = 1.0 / settings.control_hz
+
+    @classmethod
+    def from_settings(cls, settings: ServoSettings, clock: Clock) -> Joints:
+        from hal.servo_drivers import driver_for
+
+        return cls(settings, {bus.name: driver_for(bus) for bus in settings.buses}, clock)
+
+    # --- what the game sees -------------------------------------------------------------
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        return tuple(self._joints)
+
+    @property
+    def groups(self) -> Mapping[str, tuple[str, ...]]:
+        return self._groups
+
+    @property
+    def faults(self) -> tuple[Fault, ...]:
+        return tuple(self._faults)
+
+    def on_fault(self, listener: Callable[[Fault], None]) -> None:
+        """Call `listener` with every newly latched fault (the robot says so aloud)."""
+        self._fault_listeners.append(listener)
+
+    async def start(self, poll: bool = True, read: bool = True) -> None:
+        """Open the buses; with `read`, learn where every joint is; with `poll`, watch health.
+
+        Nothing is written: torque stays as found, so a restart neither slumps nor
+        jerks the robot. A servo that does not answer here is latched as a fault
+        without the safe action, for the same reason.
+        """
+        for driver in self._drivers.values():
+            await driver.start()
+        if read:
+            for driver, members in self._by_driver(self._joints.values()).items():
+                by_id = {j.servo_id: j for j in members}
+                try:
+                    raw = await driver.read_positions(list(by_id))
+                except ServoSilent as error:
+                    joint = by_id.get(error.servo_id, members[0])
+                    await self._latch(joint.name, FaultKind.SILENT, str(error), act=False)
+                    continue
+                except PortUnavailable as error:
+                    for joint in members:
+                        await self._latch(joint.name, FaultKind.BUS_LOST, str(error), act=False)
+                    continue
+                for servo_id, value in raw.items():
+                    joint = by_id[servo_id]
+                    joint.present = joint.to_degrees(value)
+                    joint.commanded = joint.clamp(joint.present)
+        if poll:
+            self._poll_task = asyncio.create_task(self._poll_forever(), name="servo health poll")
+
+    async def close(self) -> None:
+        if self._poll_task is not None:
+            self._poll_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._poll_task
+            self._poll_task = None
+        for driver in self._drivers.values():
+            await driver.close()
+
+    async def read_positions(self, group: str | None = None) -> dict[str, float]:
+        selected = [self._joints[name] for name in self._select(group)]
+        await self._read_present(selected)
+        return {j.name: j.present for j in selected if j.present is not None}
+
+    async def move(
+        self, pose: Pose, duration: float | None = None, speed: float | None = None
+    ) -> None:
+        unknown = [name for name in pose if name not in self._joints]
+        if unknown:
+            raise KeyError(f"unknown joints: {', '.join(unknown)}")
+        if duration is not None and not (duration >= 0 and math.isfinite(duration)):
+            raise UnsafeCommand(f"duration must be a finite number >= 0, found {duration}")
+        if speed is not None and not (speed > 0 and math.isfinite(speed)):
+            raise UnsafeCommand(f"speed must be a finite number > 0, found {speed}")
+        async with self._motion:
+            self._refuse_if_faulted()
+            joints = [self._joints[name] for name in pose]
+            # Torque goes on only through set_compliant(group, False), which sets the goal to
+            # the present position first and refuses a joint found outside its range.
+            limp = [j.name for j in joints if j.torque is not True]
+            if limp:
+                raise UnsafeCommand(
+                    f"torque is off or not yet turned on by set_compliant for: {', '.join(limp)}"
+                )
+            targets = {j.name: self._clamped(j, pose[j.name]) for j in joints}
+            await self._run_profile(joints, targets, duration, speed)
+
+    async def set_compliant(self, group: str, compliant: bool) -> None:
+        joints = [self._joints[name] for name in self._select(group)]
+        async with self._motion:
+            if compliant:
+                await self._torque(joints, False)
+                return
+            self._refuse_if_faulted()
+            await self._power_on(joints, strict=True)
+
+    async def rest(self, duration: float | None = None) -> None:
+        """Move every powered joint to rest; first power, safely, those never turned on.
+
+        Joints made compliant on purpose (teaching, a safe action) stay limp. A joint
+        whose torque state is unknown (just after start) is turned on as by
+        set_compliant, or left limp with a warning if it sits outside its range.
+        """
+        unknown = [j for j in self._joints.values() if j.torque is None]
+        if unknown:
+            async with self._motion:
+                self._refuse_if_faulted()
+                await self._power_on(unknown, strict=False)
+        pose = {name: j.settings.rest_deg for name, j in self._joints.items() if j.torque is True}
+        await self.move(pose, duration)
+
+    async def _power_on(self, joints: list[_Joint], strict: bool) -> None:
+        """Goal := present position, then torque on; never for a joint outside its range."""
+        await self._read_present(joints)
+        outside = [
+            j for j in joints
+            if j.present is not None
+            and abs(j.clamp(j.present) - j.present) > RANGE_TOLERANCE_DEG
+        ]
+        if outside:
+            # Torque on here would snap the joint back into range: leave it limp and say so.
+            described = "; ".join(
+                f"{j.name} at {j.present:.1f} deg (range {j.settings.range_deg[0]} to "
+                f"{j.settings.range_deg[1]})"
+                for j in outside
+            )
+            if strict:
+                raise UnsafeCommand(f"outside the safe range, left compliant: {described}")
+            log.warning("joints outside their safe range left compliant", joints=described)
+            joints = [j for j in joints if j not in outside]
+        for driver, members in self._by_driver(joints).items():
+            goals = {}
+            for joint in members:
+                joint.commanded = joint.clamp(joint.present)  # type: ignore[arg-type]
+                limit = joint.settings.max_speed_dps
+                goals[joint.servo_id] = (joint.to_raw(joint.commanded), limit)
+            await self._guarded(members[0], driver.write_goals(goals, self.step))
+        await self._torque(joints, True)
+
+    async def clear_faults(self) -> None:
+        faulty = [self._joints[f.joint] for f in self._faults if f.joint in self._joints]
+        for driver, members in self._by_driver(faulty).items():
+            try:
+                await driver.reset_errors([j.servo_id for j in members])
+            except BusError as error:
+                # Still clear: the next poll latches the fault again if it persists.
+                log.warning("servo errors could not be reset", error=str(error))
+        if self._faults:
+            log.info("servo faults cleared", faults=[str(f) for f in self._faults])
+        self._faults.clear()
+
+    # --- inspection (check, `servos read`) -----------------------------------------------
+
+    async def ping_all(self) -> dict[str, int | None]:
+        """Every joint's servo model number (0 where the protocol has none), None if silent."""
+        found: dict[str, int | None] = {}
+        for joint in self._joints.values():
+            try:
+                found[joint.name] = await joint.driver.ping(joint.servo_id)
+            except BusError:
+                found[joint.name] = None
+        return found
+
+    async def survey(self) -> list[JointStatus]:
+        """Every joint's position and health, without latching anything."""
+        statuses = []
+        for joint in self._joints.values():
+            fault = next((f for f in self._faults if f.joint == joint.name), None)
+            try:
+                raw = await joint.driver.read_positions([joint.servo_id])
+                health = await joint.driver.read_health(joint.servo_id)
+            except BusError as error:
+                lost = isinstance(error, PortUnavailable)
+                kind = FaultKind.BUS_LOST if lost else FaultKind.SILENT
+                fault = fault or Fault(joint.name, kind, str(error), self.clock.now())
+                statuses.append(JointStatus(joint.name, None, bool(joint.torque), fault=fault))
+                continue
+            if health.kind is not None and fault is None:
+                fault = Fault(joint.name, health.kind, ", ".join(health.flags), self.clock.now())
+            statuses.append(
+                JointStatus(
+                    joint.name,
+                    joint.to_degrees(raw[joint.servo_id]),
+                    bool(joint.torque),
+                    health.temperature_c,
+                    health.voltage_v,
+                    health.load,
+                    fault,
+                )
+            )
+        return statuses
+
+    # --- health polling -----------------------------------------------------------------
+
+    async def _poll_forever(self) -> None:
+        while True:
+            try:
+                await self.poll_health()
+            except Exception:  # the poll must outlive any one failure; it is logged
+                log.exception("servo health poll failed")
+            await self.clock.sleep(self.settings.poll_interval_s)
+
+    async def poll_health(self) -> None:
+        """One round of temperature, load, voltage and error bits for every joint."""
+        lost_drivers: set[int] = set()
+        for joint in self._joints.values():
+            if id(joint.driver) in lost_drivers:
+                continue
+            try:
+                health = await joint.driver.read_health(joint.servo_id)
+            except ServoSilent as error:
+                self._repeat(joint.name, "silent", str(error))
+                await self._latch(joint.name, FaultKind.SILENT, str(error))
+                continue
+            except PortUnavailable as error:
+                lost_drivers.add(id(joint.driver))
+                await self._bus_lost(self._on_driver(joint.driver), error)
+                continue
+            self._recovered(joint.name)
+            kind, detail = health.kind, ", ".join(health.flags)
+            limit = self.settings.max_temperature_c
+            hot = health.temperature_c
+            if kind is None and hot is not None and hot >= limit:
+                kind, detail = FaultKind.OVERHEATING, f"{hot:.0f} C >= {limit:.0f} C"
+            if kind is not None:
+                self._repeat(joint.name, kind.value, detail)
+                await self._latch(joint.name, kind, detail or kind.value)
+
+    # --- internals ----------------------------------------------------------------------
+
+    def _select(self, group: str | None) -> list[str]:
+        if group is None:
+            return list(self._joints)
+        if group in self._groups:
+            return list(self._groups[group])
+        if group in self._joints:
+            return [group]
+        raise KeyError(f"unknown group or joint {group!r}")
+
+    def _by_driver(self, joints: Iterable[_Joint | str]) -> dict[ServoDriver, list[_Joint]]:
+        grouped: dict[ServoDriver, list[_Joint]] = {}
+        for item in joints:
+            joint = self._joints[item] if isinstance(item, str) else item
+            grouped.setdefault(joint.driver, []).append(joint)
+        return grouped
+
+    def _refuse_if_faulted(self) -> None:
+        if self._faults:
+            raise ServoFaultError(
+                "motion refused while faults are latched: " + "; ".join(map(str, self._faults))
+            )
+
+    def _clamped(self, joint: _Joint, degrees: float) -> float:
+        if not math.isfinite(degrees):
+            raise UnsafeCommand(f"{joint.name}: target {degrees} is not a number")
+        clamped = joint.clamp(degrees)
+        if clamped != degrees:
+            log.warning(
+                "joint target clamped to its safe range",
+                joint=joint.name,
+                asked_deg=degrees,
+                clamped_deg=clamped,
+                range_deg=list(joint.settings.range_deg),
+            )
+        return clamped
+
+    async def _run_profile(
+        self,
+        joints: list[_Joint],
+        targets: dict[str, float],
+        duration: float | None,
+        speed: float | None,
+    ) -> None:
+        starts = {}
+        for joint in joints:
+            if joint.commanded is None:  # never guess a start: a guess can be a jump
+                raise UnsafeCommand(f"{joint.name}: no known position to start from")
+            starts[joint.name] = joint.commanded
+        limits = {j.name: min(j.settings.max_speed_dps, speed or math.inf) for j in joints}
+        # Long enough that the profile's steepest step keeps every joint within its limit.
+        needed = max(
+            (PROFILE_PEAK * abs(targets[n] - starts[n]) / limits[n] for n in targets), default=0.0
+        )
+        total = max(duration or 0.0, needed)
+        steps = max(1, math.ceil(total / self.step - 1e-9))
+        begin = self.clock.now()
+        by_driver = self._by_driver(joints)
+        for k in range(1, steps + 1):
+            self._refuse_if_faulted()
+            fraction = smoothstep(k / steps)
+            for driver, members in by_driver.items():
+                goals = {}
+                for joint in members:
+                    start, end = starts[joint.name], targets[joint.name]
+                    joint.commanded = joint.clamp(start + (end - start) * fraction)
+                    goals[joint.servo_id] = (joint.to_raw(joint.commanded), limits[joint.name])
+                await self._guarded(members[0], driver.write_goals(goals, self.step))
+            # Absolute schedule: a late step is not followed by a catch-up burst.
+            delay = begin + k * self.step - self.clock.now()
+            await self.clock.sleep(max(0.0, delay) if k < steps else 0.0)
+
+    async def _guarded(self, joint: _Joint, operation: Awaitable[T]) -> T:
+        try:
+            return await operation
+        except ServoSilent as error:
+            await self._latch(joint.name, FaultKind.SILENT, str(error))
+            raise ServoFaultError(str(error)) from error
+        except PortUnavailable as error:
+            await self._bus_lost(self._on_driver(joint.driver), error)
+            raise ServoFaultError(str(error)) from error
+
+    def _on_driver(self, driver: ServoDriver) -> list[_Joint]:
+        return [j for j in self._joints.values() if j.driver is driver]
+
+    async def _read_present(self, joints: list[_Joint]) -> None:
+        for driver, members in self._by_driver(joints).items():
+            by_id = {j.servo_id: j for j in members}
+            try:
+                raw = await driver.read_positions(list(by_id))
+            except ServoSilent as error:
+                joint = by_id.get(error.servo_id, members[0])
+                await self._latch(joint.name, FaultKind.SILENT, str(error))
+                raise ServoFaultError(str(error)) from error
+            except PortUnavailable as error:
+                await self._bus_lost(self._on_driver(driver), error)
+                raise ServoFaultError(str(error)) from error
+            for servo_id, value in raw.items():
+                by_id[servo_id].present = by_id[servo_id].to_degrees(value)
+
+    async def _torque(self, joints: list[_Joint], on: bool) -> None:
+        for driver, members in self._by_driver(joints).items():
+            await self._guarded(members[0], driver.set_torque([j.servo_id for j in members], on))
+            for joint in members:
+                joint.torque = on
+                if not on:
+                    joint.commanded = None
+
+    async def _bus_lost(self, joints: list[_Joint], error: BaseException) -> None:
+        for joint in joints:
+            await self._latch(joint.name, FaultKind.BUS_LOST, str(error), act=False)
+        await self._safe_action(None)
+
+    async def _latch(self, joint: str, kind: FaultKind, detail: str, act: bool = True) -> None:
+        if any(f.joint == joint and f.kind is kind for f in self._faults):
+            return
+        fault = Fault(joint, kind, detail, self.clock.now())
+        self._faults.append(fault)
+        log.error("servo fault latched", joint=joint, kind=kind.value, detail=detail,
+                  safe_action=self.settings.safe_action)
+        for listener in self._fault_listeners:
+            listener(fault)
+        if act:
+            await self._safe_action(self._joints[joint])
+
+    async def _safe_action(self, faulty: _Joint | None) -> None:
+        """Free the faulty servo; then hold everything else, or free it all."""
+        targets = list(self._joints.values()) if self.settings.safe_action == "torque_off" else []
+        if faulty is not None and faulty not in targets:
+            targets.append(faulty)
+        # "hold" needs no packet: moves stop at their next step (faults are latched) and
+        # every servo keeps its last goal.
+        for driver, members in self._by_driver(targets).items():
+            try:
+                await driver.set_torque([j.servo_id for j in members], False)
+            except BusError as error:
+                self._repeat("safe-action", "failed", str(error))
+                continue
+            for joint in members:
+                joint.torque = False
+                joint.commanded = None
+
+    def _repeat(self, key: str, kind: str, detail: str) -> None:
+        if self._repeats.first(key, f"{kind}: {detail}"):
+            log.warning("servo error", joint=key, kind=kind, detail=detail)
+
+    def _recovered(self, key: str) -> None:
+        repeated = self._repeats.end(key)
+        if repeated is not None:
+            log.info("servo error no longer seen", joint=key, error=repeated[0], times=repeated[1])

@@ -1,0 +1,178 @@
+"""What the game sees of the servos (ServoApi), and what a bus driver gives the joints layer.
+
+The game speaks in named joints, groups and degrees; it never sees a bus, an
+id or a raw unit. Both the real joints (hal.joints.Joints) and the simulated
+ones (hal.sim_servos.SimServos) implement ServoApi, with the same safety rules.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
+
+if TYPE_CHECKING:
+    from hal.clock import Clock
+    from hal.servo_settings import ServoSettings
+
+
+class FaultKind(enum.Enum):
+    SILENT = "silent"  # the servo stopped answering
+    OVERHEATING = "overheating"
+    OVERLOAD = "overload"
+    VOLTAGE = "voltage"  # input voltage outside the servo's limits
+    HARDWARE = "hardware"  # encoder, driver or memory fault reported by the servo
+    BUS_LOST = "bus_lost"  # the serial adapter vanished
+
+
+@dataclass(frozen=True, slots=True)
+class Fault:
+    """A latched fault: it stays until clear_faults(), and it names the joint."""
+
+    joint: str
+    kind: FaultKind
+    detail: str
+    time: float  # Clock.now() when it was latched
+
+    def __str__(self) -> str:
+        return f"{self.joint}: {self.kind.value} ({self.detail})"
+
+
+@dataclass(frozen=True, slots=True)
+class JointStatus:
+    """One joint as `kasparctl servos read` and the health poll see it."""
+
+    joint: str
+    position_deg: float | None
+    torque: bool
+    temperature_c: float | None = None
+    voltage_v: float | None = None
+    load: float | None = None  # fraction of maximum torque, signed by direction
+    fault: Fault | None = None
+
+
+Pose = Mapping[str, float]  # joint name -> degrees
+
+
+@runtime_checkable
+class ServoApi(Protocol):
+    """The servos as the game uses them. Every method is safe to call at any time.
+
+    Safety is the implementation's job, not the caller's: targets outside a
+    joint's range are clamped (and the clamp is logged), no joint moves faster
+    than its limit whatever `duration` says, turning torque on never makes a
+    joint jump, and while a fault is latched motion is refused.
+    """
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        """Every configured joint name."""
+        ...
+
+    @property
+    def groups(self) -> Mapping[str, tuple[str, ...]]:
+        """Group name (left_arm, head, ...) -> its joints."""
+        ...
+
+    @property
+    def faults(self) -> tuple[Fault, ...]:
+        """The latched faults, oldest first; empty when all is well."""
+        ...
+
+    async def start(self) -> None:
+        """Open the buses and read where every joint is; torque is left as found."""
+        ...
+
+    async def close(self) -> None:
+        """Stop polling and release the buses (torque is left as it is: no slump)."""
+        ...
+
+    async def read_positions(self, group: str | None = None) -> dict[str, float]:
+        """Present positions in degrees of a group's joints (all joints if None)."""
+        ...
+
+    async def move(
+        self, pose: Pose, duration: float | None = None, speed: float | None = None
+    ) -> None:
+        """Move the joints in `pose` together, arriving after `duration` seconds.
+
+        Without a duration, each joint goes at `speed` deg/s, or at its own limit.
+        Returns when the motion has been commanded to its end. Raises
+        ServoFaultError while a fault is latched, UnsafeCommand for a joint whose
+        torque has not been turned on by set_compliant(group, False), and KeyError
+        for an unknown joint.
+        """
+        ...
+
+    async def set_compliant(self, group: str, compliant: bool) -> None:
+        """Torque off (a child can move the arm by hand) or back on, holding where it is."""
+        ...
+
+    async def rest(self, duration: float | None = None) -> None:
+        """Move the joints to their rest positions, within their speed limits.
+
+        Joints whose torque is still unknown (just after start) are first turned on
+        the safe way, as by set_compliant(group, False); one found outside its range
+        stays limp (logged). Joints made compliant on purpose stay limp.
+        """
+        ...
+
+    async def clear_faults(self) -> None:
+        """Reset the faulty servos' error state and forget the latched faults.
+
+        Joints freed by the safe action stay limp: set_compliant(group, False)
+        turns them back on, from where they are.
+        """
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class Health:
+    """One servo's condition as its driver reads it; `kind` is set when it is a fault."""
+
+    position: int | None = None
+    temperature_c: float | None = None
+    voltage_v: float | None = None
+    load: float | None = None
+    flags: tuple[str, ...] = ()  # the protocol's error bits, by name
+    kind: FaultKind | None = None
+
+
+class ServoDriver(Protocol):
+    """The servos of one bus in raw units; each call is as few packets as the protocol allows."""
+
+    async def start(self) -> None: ...
+
+    async def close(self) -> None: ...
+
+    async def ping(self, servo_id: int) -> int | None:
+        """The model number of a servo that answers, or None when it is silent."""
+        ...
+
+    async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        """Present raw positions; raises ServoSilent naming the first servo that did not answer."""
+        ...
+
+    async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        """Raw goal and speed limit (deg/s) per servo, reached within `step` seconds; one packet."""
+        ...
+
+    async def set_torque(self, ids: Sequence[int], on: bool) -> None: ...
+
+    async def read_health(self, servo_id: int) -> Health: ...
+
+    async def reset_errors(self, ids: Sequence[int]) -> None:
+        """Clear the servos' own latched error state (where the protocol latches one)."""
+        ...
+
+
+def build_servos(settings: ServoSettings, clock: Clock) -> ServoApi:
+    """The configured backend: the real buses, or the simulated servos."""
+    if settings.backend == "real":
+        from hal.joints import Joints
+
+        return Joints.from_settings(settings, clock)
+    from hal.sim_servos import SimServos
+
+    return SimServos(settings, clock)

@@ -1,0 +1,398 @@
+"""Bus drivers: the generic servo operations in each protocol's fewest packets.
+
+Each driver owns a SerialBus and turns ServoDriver calls into codec packets:
+positions by SYNC_READ where the protocol has it (Dynamixel 2.0), in one
+write of every request on a Maestro, one READ per servo otherwise; goals in
+one SYNC_WRITE, S_JOG or multiple-target packet per control step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+from hal import dynamixel1 as dx1
+from hal import dynamixel2 as dx2
+from hal import herkulex as hx
+from hal import maestro as mo
+from hal.bus import Exchange, Framing, SerialBus
+from hal.errors import BusTimeout, CodecError, PortUnavailable, ServoSilent
+from hal.servo_api import FaultKind, Health
+from hal.servo_settings import BusSettings
+
+AX12_SPEED_DPS_PER_UNIT = 0.111 * 6  # moving speed unit: 0.111 rpm
+
+
+def _flags(value: int, flag_type: Any) -> tuple[str, ...]:
+    return tuple(str(flag.name) for flag in flag_type if value & flag)
+
+
+class _BusDriver:
+    framing: Framing
+
+    def __init__(self, bus: SerialBus) -> None:
+        self.bus = bus
+
+    async def _each(self, ids: Sequence[int], exchanges: list[Exchange]) -> list[Any]:
+        """Run one exchange per servo; the first that failed is named as silent."""
+        outcomes = await self.bus.exchange_all(exchanges)
+        for servo_id, outcome in zip(ids, outcomes, strict=True):
+            if isinstance(outcome, PortUnavailable):
+                raise outcome
+            if isinstance(outcome, (BusTimeout, CodecError)):
+                message = f"servo {servo_id} on bus {self.bus.name}: no valid reply ({outcome})"
+                raise ServoSilent(servo_id, message)
+            if isinstance(outcome, Exception):
+                raise outcome
+        return outcomes
+
+    async def start(self) -> None:
+        await self.bus.start()
+
+    async def close(self) -> None:
+        await self.bus.close()
+
+    async def _ask(
+        self, servo_id: int, request: bytes, decode: Callable[[list[bytes]], Any], expect: int
+    ) -> Any:
+        try:
+            return await self.bus.transact(request, 1, self.framing, decode, expect)
+        except (BusTimeout, CodecError) as error:
+            # A servo whose every reply is corrupt is as unusable as a silent one.
+            message = f"servo {servo_id} on bus {self.bus.name}: no valid reply ({error})"
+            raise ServoSilent(servo_id, message) from None
+
+
+class Dynamixel1Driver(_BusDriver):
+    framing = Framing(dx1.HEAD_SIZE, dx1.packet_length)
+
+    def _status(self, servo_id: int, length: int) -> Callable[[list[bytes]], dx1.Status]:
+        def decode(packets: list[bytes]) -> dx1.Status:
+            status = dx1.decode_status(packets[0])
+            if status.servo_id != servo_id or len(status.params) != length:
+                raise dx1.DynamixelError(
+                    f"reply from id {status.servo_id} with {len(status.params)} bytes, "
+                    f"expected id {servo_id} with {length}"
+                )
+            return status
+
+        return decode
+
+    async def _read(self, servo_id: int, address: int, length: int) -> dx1.Status:
+        request = dx1.read(servo_id, address, length)
+        return await self._ask(servo_id, request, self._status(servo_id, length), 6 + length)
+
+    async def ping(self, servo_id: int) -> int | None:
+        try:
+            await self._ask(servo_id, dx1.ping(servo_id), self._status(servo_id, 0), 6)
+            status = await self._read(servo_id, dx1.AX12.MODEL_NUMBER, 2)
+        except ServoSilent:
+            return None
+        return dx1.u16(status.params)
+
+    async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        # The AX-12A has neither SYNC_READ nor BULK_READ: one READ per servo, all
+        # handed to the bus thread at once.
+        exchanges = [
+            Exchange(dx1.read(i, dx1.AX12.PRESENT_POSITION, 2), 1, self.framing,
+                     self._status(i, 2), 8)
+            for i in ids
+        ]
+        outcomes = await self._each(ids, exchanges)
+        return {i: dx1.u16(status.params) for i, status in zip(ids, outcomes, strict=True)}
+
+    async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        data = {}
+        for servo_id, (raw, speed_dps) in goals.items():
+            # Moving speed 0 means "as fast as possible": never send it.
+            speed = min(1023, max(1, math.ceil(speed_dps / AX12_SPEED_DPS_PER_UNIT)))
+            data[servo_id] = dx1.le16(raw) + dx1.le16(speed)
+        await self.bus.transact(dx1.sync_write(dx1.AX12.GOAL_POSITION, 4, data))
+
+    async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        data = {servo_id: bytes((int(on),)) for servo_id in ids}
+        await self.bus.transact(dx1.sync_write(dx1.AX12.TORQUE_ENABLE, 1, data))
+
+    async def reset_errors(self, ids: Sequence[int]) -> None:
+        return None  # AX-12A error bits clear themselves once the condition has gone
+
+    async def read_health(self, servo_id: int) -> Health:
+        status = await self._read(servo_id, dx1.AX12.PRESENT_POSITION, 8)
+        params, error = status.params, status.error
+        load_raw = dx1.u16(params, 4)
+        load = (load_raw & 0x3FF) / 1023 * (-1 if load_raw & 0x400 else 1)
+        kind = None
+        if error & dx1.ErrorBits.OVERHEATING:
+            kind = FaultKind.OVERHEATING
+        elif error & dx1.ErrorBits.OVERLOAD:
+            kind = FaultKind.OVERLOAD
+        elif error & dx1.ErrorBits.INPUT_VOLTAGE:
+            kind = FaultKind.VOLTAGE
+        return Health(
+            position=dx1.u16(params, 0),
+            temperature_c=float(params[7]),
+            voltage_v=params[6] / 10,
+            load=load,
+            flags=_flags(error, dx1.ErrorBits),
+            kind=kind,
+        )
+
+
+class Dynamixel2Driver(_BusDriver):
+    framing = Framing(dx2.HEAD_SIZE, dx2.packet_length)
+
+    def _status(self, servo_id: int, length: int) -> Callable[[list[bytes]], dx2.Status]:
+        def decode(packets: list[bytes]) -> dx2.Status:
+            status = dx2.decode_status(packets[0])
+            if status.servo_id != servo_id or len(status.params) != length:
+                raise dx2.DynamixelError(f"reply from id {status.servo_id}, expected {servo_id}")
+            return status
+
+        return decode
+
+    async def _read(self, servo_id: int, address: int, length: int) -> dx2.Status:
+        request = dx2.read(servo_id, address, length)
+        return await self._ask(servo_id, request, self._status(servo_id, length), 11 + length)
+
+    async def ping(self, servo_id: int) -> int | None:
+        try:
+            status = await self._ask(servo_id, dx2.ping(servo_id), self._status(servo_id, 3), 14)
+        except ServoSilent:
+            return None
+        return dx2.u16(status.params)
+
+    async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        ids = list(ids)
+
+        def decode(packets: list[bytes]) -> dict[int, int]:
+            positions = {}
+            for servo_id, packet in zip(ids, packets, strict=True):
+                status = dx2.decode_status(packet)
+                if status.servo_id != servo_id or len(status.params) != 4:
+                    raise dx2.DynamixelError(f"reply from {status.servo_id}, not {servo_id}")
+                positions[servo_id] = dx2.s32(status.params)
+            return positions
+
+        request = dx2.sync_read(dx2.XSeries.PRESENT_POSITION, 4, ids)
+        try:
+            return await self.bus.transact(request, len(ids), self.framing, decode, 15 * len(ids))
+        except (BusTimeout, CodecError):
+            pass
+        # One servo is silent and the SYNC_READ cannot say which: ask each, to name it.
+        positions = {}
+        for servo_id in ids:
+            status = await self._read(servo_id, dx2.XSeries.PRESENT_POSITION, 4)
+            positions[servo_id] = dx2.s32(status.params)
+        return positions
+
+    async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        data = {servo_id: dx2.le32(raw) for servo_id, (raw, _speed) in goals.items()}
+        await self.bus.transact(dx2.sync_write(dx2.XSeries.GOAL_POSITION, 4, data))
+
+    async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        data = {servo_id: bytes((int(on),)) for servo_id in ids}
+        await self.bus.transact(dx2.sync_write(dx2.XSeries.TORQUE_ENABLE, 1, data))
+
+    async def reset_errors(self, ids: Sequence[int]) -> None:
+        # An X series servo keeps its Hardware Error Status until rebooted (torque stays off).
+        for servo_id in ids:
+            await self._ask(servo_id, dx2.reboot(servo_id), self._status(servo_id, 0), 11)
+
+    async def read_health(self, servo_id: int) -> Health:
+        start = dx2.XSeries.PRESENT_LOAD
+        length = dx2.XSeries.PRESENT_TEMPERATURE + 1 - start
+        status = await self._read(servo_id, start, length)
+        params = status.params
+        hardware = 0
+        if status.alert:
+            reply = await self._read(servo_id, dx2.XSeries.HARDWARE_ERROR_STATUS, 1)
+            hardware = reply.params[0]
+        kind = None
+        if hardware & dx2.HardwareError.OVERHEATING:
+            kind = FaultKind.OVERHEATING
+        elif hardware & dx2.HardwareError.OVERLOAD:
+            kind = FaultKind.OVERLOAD
+        elif hardware & dx2.HardwareError.INPUT_VOLTAGE:
+            kind = FaultKind.VOLTAGE
+        elif hardware:
+            kind = FaultKind.HARDWARE
+        load = int.from_bytes(params[0:2], "little", signed=True) / 1000
+        offset = lambda address: address - start  # noqa: E731
+        return Health(
+            position=dx2.s32(params, offset(dx2.XSeries.PRESENT_POSITION)),
+            temperature_c=float(params[offset(dx2.XSeries.PRESENT_TEMPERATURE)]),
+            voltage_v=dx2.u16(params, offset(dx2.XSeries.PRESENT_INPUT_VOLTAGE)) / 10,
+            load=load,
+            flags=_flags(hardware, dx2.HardwareError),
+            kind=kind,
+        )
+
+
+class HerkulexDriver(_BusDriver):
+    framing = Framing(hx.HEAD_SIZE, hx.packet_length)
+
+    def _ack(self, servo_id: int, command: hx.Command) -> Callable[[list[bytes]], hx.Ack]:
+        def decode(packets: list[bytes]) -> hx.Ack:
+            reply = hx.decode_ack(packets[0])
+            if reply.servo_id != servo_id or reply.command is not command:
+                raise hx.HerkulexError(f"reply from id {reply.servo_id}, expected {servo_id}")
+            return reply
+
+        return decode
+
+    async def _ram_read(self, servo_id: int, address: int, length: int) -> hx.Ack:
+        request = hx.ram_read(servo_id, address, length)
+        reply = await self._ask(
+            servo_id, request, self._ack(servo_id, hx.Command.RAM_READ), 11 + length
+        )
+        read_address, value = reply.read_value()
+        if read_address != address or len(value) != length:
+            raise ServoSilent(servo_id, f"servo {servo_id}: read reply for the wrong register")
+        return reply
+
+    async def ping(self, servo_id: int) -> int | None:
+        try:
+            request = hx.eep_read(servo_id, hx.Eep.MODEL_NO_1, 2)
+            reply = await self._ask(servo_id, request, self._ack(servo_id, hx.Command.EEP_READ), 13)
+        except ServoSilent:
+            return None
+        _, value = reply.read_value()
+        return value[0] << 8 | value[1] if len(value) == 2 else None
+
+    async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        # HerkuleX has no group read: one RAM_READ per servo, handed over at once.
+        address = hx.Ram.CALIBRATED_POSITION
+        exchanges = [
+            Exchange(hx.ram_read(i, address, 2), 1, self.framing,
+                     self._value(i, hx.Command.RAM_READ, address, 2), 13)
+            for i in ids
+        ]
+        outcomes = await self._each(ids, exchanges)
+        return {i: hx.u16(value) & 0x7FFF for i, value in zip(ids, outcomes, strict=True)}
+
+    def _value(
+        self, servo_id: int, command: hx.Command, address: int, length: int
+    ) -> Callable[[list[bytes]], bytes]:
+        check = self._ack(servo_id, command)
+
+        def decode(packets: list[bytes]) -> bytes:
+            read_address, value = check(packets).read_value()
+            if read_address != address or len(value) != length:
+                raise hx.HerkulexError(f"servo {servo_id}: reply for the wrong register")
+            return value
+
+        return decode
+
+    async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        playtime = min(255, max(1, round(step / hx.PLAYTIME_SECONDS)))
+        moves = [(servo_id, raw, 0) for servo_id, (raw, _speed) in goals.items()]
+        await self.bus.transact(hx.s_jog(playtime, moves))
+
+    async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        value = bytes((hx.TorqueControl.ON if on else hx.TorqueControl.FREE,))
+        # With the factory ACK policy (reads only) writes are not answered: one write for all.
+        request = b"".join(hx.ram_write(i, hx.Ram.TORQUE_CONTROL, value) for i in ids)
+        await self.bus.transact(request)
+
+    async def reset_errors(self, ids: Sequence[int]) -> None:
+        # A HerkuleX latches its status error until it is written back to zero.
+        zero = bytes((0, 0))
+        await self.bus.transact(b"".join(hx.ram_write(i, hx.Ram.STATUS_ERROR, zero) for i in ids))
+
+    async def read_health(self, servo_id: int) -> Health:
+        reply = await self._ram_read(servo_id, hx.Ram.VOLTAGE, 1)
+        error = reply.status_error
+        kind = None
+        if error & hx.StatusError.EXCEED_TEMPERATURE:
+            kind = FaultKind.OVERHEATING
+        elif error & hx.StatusError.OVERLOAD:
+            kind = FaultKind.OVERLOAD
+        elif error & hx.StatusError.EXCEED_INPUT_VOLTAGE:
+            kind = FaultKind.VOLTAGE
+        elif error & (hx.StatusError.DRIVER_FAULT | hx.StatusError.EEP_DISTORTED):
+            kind = FaultKind.HARDWARE
+        return Health(
+            voltage_v=reply.read_value()[1][0] * 0.074,
+            flags=_flags(error, hx.StatusError),
+            kind=kind,
+        )
+
+
+class MaestroDriver(_BusDriver):
+    framing = Framing(2, lambda head: 2)
+
+    async def ping(self, servo_id: int) -> int | None:
+        try:
+            await self._ask(servo_id, mo.get_errors(), lambda p: mo.decode_errors(p[0]), 2)
+        except ServoSilent:
+            return None
+        return 0
+
+    async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        ids = list(ids)
+        # Every Get Position in one write; the replies come back in order, 2 bytes each.
+        request = b"".join(mo.get_position(channel) for channel in ids)
+
+        def decode(packets: list[bytes]) -> dict[int, int]:
+            return {c: mo.decode_position(p) for c, p in zip(ids, packets, strict=True)}
+
+        try:
+            return await self.bus.transact(request, len(ids), self.framing, decode, 2 * len(ids))
+        except (BusTimeout, CodecError):
+            raise ServoSilent(ids[0], f"maestro on bus {self.bus.name} did not answer") from None
+
+    async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        await self.bus.transact(self._targets({c: raw for c, (raw, _) in goals.items()}))
+
+    @staticmethod
+    def _targets(targets: Mapping[int, int]) -> bytes:
+        # Consecutive channels share one Set Multiple Targets; the rest get Set Target.
+        out = b""
+        channels = sorted(targets)
+        start = 0
+        while start < len(channels):
+            end = start
+            while end + 1 < len(channels) and channels[end + 1] == channels[end] + 1:
+                end += 1
+            run = channels[start : end + 1]
+            if len(run) > 1:
+                out += mo.set_multiple_targets(run[0], [targets[c] for c in run])
+            else:
+                out += mo.set_target(run[0], targets[run[0]])
+            start = end + 1
+        return out
+
+    async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        # A hobby servo has no torque switch: target 0 stops its pulses (limp). Turning
+        # it back on is the next goal write, which the joints layer makes the present position.
+        if not on:
+            await self.bus.transact(self._targets(dict.fromkeys(ids, 0)))
+
+    async def reset_errors(self, ids: Sequence[int]) -> None:
+        await self._ask(ids[0] if ids else 0, mo.get_errors(), lambda p: mo.decode_errors(p[0]), 2)
+
+    async def read_health(self, servo_id: int) -> Health:
+        errors = await self._ask(servo_id, mo.get_errors(), lambda p: mo.decode_errors(p[0]), 2)
+        # The Maestro's errors are about its serial link and script, not a servo: report them
+        # as flags without latching a fault.
+        return Health(flags=_flags(errors, mo.Errors))
+
+
+DRIVERS: dict[str, type[_BusDriver]] = {
+    "dynamixel1": Dynamixel1Driver,
+    "dynamixel2": Dynamixel2Driver,
+    "herkulex": HerkulexDriver,
+    "maestro": MaestroDriver,
+}
+
+
+def driver_for(settings: BusSettings) -> _BusDriver:
+    bus = SerialBus(
+        settings.name,
+        settings.port,
+        settings.baud,
+        timeout_margin=settings.timeout_margin_ms / 1000,
+        retries=settings.retries,
+    )
+    return DRIVERS[settings.protocol](bus)

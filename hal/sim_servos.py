@@ -1,0 +1,159 @@
+"""Simulated servos with the same interface and the same safety code as the real ones.
+
+SimServos is the Joints layer over SimDriver, a driver whose servos live in
+memory: positions move toward their goals at the commanded speed as the
+injected clock advances, torque can be off (a hand can then move the joint),
+and faults can be injected per servo (silent, overheating, overload, ...).
+So the game, the demo and the tests exercise exactly the clamps, speed
+limits and fault handling that drive the robot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+from hal.clock import Clock
+from hal.errors import ServoSilent
+from hal.joints import Joints
+from hal.servo_api import FaultKind, Health
+from hal.servo_settings import ServoModel, ServoSettings
+
+
+@dataclass
+class SimServo:
+    model: ServoModel
+    present: float  # raw units
+    goal: float
+    speed: float = 0.0  # raw units per second toward the goal
+    torque: bool = False
+    temperature_c: float = 35.0
+    fault: FaultKind | None = None  # SILENT makes it stop answering
+
+
+@dataclass
+class GoalWrite:
+    """One goal packet, as the tests see it: when, and raw goal per servo id."""
+
+    time: float
+    goals: dict[int, int]
+
+
+@dataclass(eq=False)  # identity-hashed: the joints layer groups joints by driver
+class SimDriver:
+    """A bus of simulated servos; `writes` records every goal packet sent."""
+
+    name: str
+    clock: Clock
+    servos: dict[int, SimServo]
+    writes: list[GoalWrite] = field(default_factory=list)
+    _stamp: float | None = None
+
+    def _advance(self) -> None:
+        now = self.clock.now()
+        elapsed = 0.0 if self._stamp is None else now - self._stamp
+        self._stamp = now
+        for servo in self.servos.values():
+            if not servo.torque or servo.fault is FaultKind.SILENT:
+                continue
+            step = servo.speed * elapsed
+            delta = servo.goal - servo.present
+            servo.present = servo.goal if abs(delta) <= step else (
+                servo.present + (step if delta > 0 else -step)
+            )
+
+    def _answering(self, servo_id: int) -> SimServo:
+        servo = self.servos.get(servo_id)
+        if servo is None or servo.fault is FaultKind.SILENT:
+            raise ServoSilent(servo_id, f"servo {servo_id} on bus {self.name}: no reply")
+        return servo
+
+    async def start(self) -> None:
+        self._advance()
+
+    async def close(self) -> None:
+        return None
+
+    async def ping(self, servo_id: int) -> int | None:
+        try:
+            servo = self._answering(servo_id)
+        except ServoSilent:
+            return None
+        return servo.model.model_number or 0
+
+    async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        self._advance()
+        return {servo_id: round(self._answering(servo_id).present) for servo_id in ids}
+
+    async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        self._advance()
+        self.writes.append(GoalWrite(self.clock.now(), {i: raw for i, (raw, _) in goals.items()}))
+        for servo_id, (raw, speed_dps) in goals.items():
+            servo = self.servos.get(servo_id)
+            if servo is None or servo.fault is FaultKind.SILENT:
+                continue  # a broadcast write: a silent servo just does not act on it
+            servo.goal = raw
+            servo.speed = speed_dps / servo.model.degrees_per_unit
+            servo.torque = True  # as on a Dynamixel, a goal write turns torque on
+
+    async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        self._advance()
+        for servo_id in ids:
+            servo = self.servos.get(servo_id)
+            if servo is not None and servo.fault is not FaultKind.SILENT:
+                servo.torque = on
+
+    async def reset_errors(self, ids: Sequence[int]) -> None:
+        return None  # a simulated fault lasts until inject_fault(joint, None)
+
+    async def read_health(self, servo_id: int) -> Health:
+        self._advance()
+        servo = self._answering(servo_id)
+        return Health(
+            position=round(servo.present),
+            temperature_c=servo.temperature_c,
+            voltage_v=12.0,
+            load=0.0,
+            flags=(servo.fault.name,) if servo.fault else (),
+            kind=servo.fault,
+        )
+
+
+class SimServos(Joints):
+    """The ServoApi on simulated servos; they start at rest, limp, as a robot is powered on."""
+
+    def __init__(self, settings: ServoSettings, clock: Clock) -> None:
+        drivers: dict[str, SimDriver] = {}
+        for bus in settings.buses:
+            servos = {}
+            for joint in settings.joints:
+                if joint.bus == bus.name:
+                    raw = joint.servo.to_raw(joint.rest_deg, joint.direction, joint.offset_deg)
+                    servos[joint.id] = SimServo(joint.servo, raw, raw)
+            drivers[bus.name] = SimDriver(bus.name, clock, servos)
+        super().__init__(settings, drivers, clock)
+        self.drivers: dict[str, SimDriver] = drivers
+
+    def servo(self, joint: str) -> SimServo:
+        settings = next(j for j in self.settings.joints if j.name == joint)
+        return self.drivers[settings.bus].servos[settings.id]
+
+    def inject_fault(self, joint: str, kind: FaultKind | None) -> None:
+        """From now on the joint's servo reports `kind` (None heals it); the poll latches it."""
+        self.servo(joint).fault = kind
+
+    def push(self, joint: str, degrees: float) -> None:
+        """A child moves a limp joint by hand (ignored while its torque is on)."""
+        settings = next(j for j in self.settings.joints if j.name == joint)
+        servo = self.servo(joint)
+        if not servo.torque:
+            servo.present = servo.goal = settings.servo.to_raw(
+                degrees, settings.direction, settings.offset_deg
+            )
+
+    def true_position(self, joint: str) -> float:
+        """Where the simulated joint really is, in degrees (for tests and the demo)."""
+        settings = next(j for j in self.settings.joints if j.name == joint)
+        return settings.servo.to_degrees(
+            self.servo(joint).present, settings.direction, settings.offset_deg
+        )

@@ -1,0 +1,70 @@
+"""A Pololu Mini Maestro on a pty: compact protocol, targets, speed limits, errors."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from emulators.base import Axis, Emulator
+from hal import maestro as mo
+
+
+class MaestroEmulator(Emulator):
+    def __init__(self, path: Path, channels: int = 12, rate: float = 40000.0) -> None:
+        self.channels = channels
+        self.axes = [Axis(6000, 6000, rate) for _ in range(channels)]
+        self.targets = [0] * channels
+        self.errors = 0
+        super().__init__(path)
+
+    def split(self, buffer: bytes) -> tuple[bytes | None, bytes]:
+        while buffer and buffer[0] < 0x80:
+            buffer = buffer[1:]
+        if not buffer:
+            return None, buffer
+        try:
+            length = mo.command_length(buffer[:2])
+        except mo.MaestroError:
+            if len(buffer) < 2 and buffer[0] == mo.Command.SET_MULTIPLE_TARGETS:
+                return None, buffer
+            self.errors |= mo.Errors.SERIAL_PROTOCOL
+            return self.split(buffer[1:])
+        if len(buffer) < length:
+            return None, buffer
+        return buffer[:length], buffer[length:]
+
+    def _set(self, channel: int, target: int) -> None:
+        if channel >= self.channels:
+            self.errors |= mo.Errors.SERIAL_PROTOCOL
+            return
+        axis = self.axes[channel]
+        axis.update(time.monotonic())
+        self.targets[channel] = target
+        axis.torque = target != 0  # target 0 stops the pulses: the servo goes limp
+        if target:
+            axis.goal = target
+
+    def handle(self, packet: bytes) -> list[tuple[int, bytes]]:
+        try:
+            command, args = mo.decode_command(packet)
+        except mo.MaestroError:
+            self.errors |= mo.Errors.SERIAL_PROTOCOL
+            return []
+        if command is mo.Command.SET_TARGET:
+            self._set(*args)
+        elif command is mo.Command.SET_MULTIPLE_TARGETS:
+            for offset, target in enumerate(args[1:]):
+                self._set(args[0] + offset, target)
+        elif command is mo.Command.GET_POSITION:
+            channel = args[0]
+            position = round(self.axes[channel].update(time.monotonic())) if channel < self.channels else 0
+            return [(channel, bytes((position & 0xFF, position >> 8)))]
+        elif command is mo.Command.GET_ERRORS:
+            errors = self.errors | self.faults.error_bits.get(0, 0)
+            self.errors = 0
+            return [(0, bytes((errors & 0xFF, errors >> 8)))]
+        elif command is mo.Command.GET_MOVING_STATE:
+            now = time.monotonic()
+            moving = any(a.update(now) != round(a.goal) for a in self.axes if a.torque)
+            return [(0, bytes((int(moving),)))]
+        return []

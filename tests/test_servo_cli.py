@@ -1,0 +1,125 @@
+"""`kasparctl servos scan/read` and `kasparctl check` against emulated buses."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import structlog
+from emulators.dynamixel import Dynamixel1Emulator, Dynamixel2Emulator
+from emulators.herkulex import HerkulexEmulator
+
+from kasparctl.cli import main
+
+
+@pytest.fixture(autouse=True)
+def _restore_logging():
+    # The commands send the log to stderr, here pytest's capture, which closes after the test.
+    yield
+    structlog.reset_defaults()
+
+
+@pytest.mark.parametrize(
+    ("protocol", "emulator_type", "model", "position"),
+    [
+        ("dynamixel1", Dynamixel1Emulator, "ax-12a", 512),
+        ("dynamixel2", Dynamixel2Emulator, "xl430-w250", 2048),
+        ("herkulex", HerkulexEmulator, "drs-0101", 512),
+    ],
+)
+def test_scan_lists_the_answering_ids_as_json(tmp_path, capsys, protocol, emulator_type, model,
+                                              position):
+    with emulator_type(tmp_path / "tty", ids=[2, 5]):
+        code = main(["servos", "scan", "--port", str(tmp_path / "tty"), "--protocol", protocol,
+                     "--baud", "1000000", "--ids", "1-6", "--margin-ms", "100", "--json"])
+    assert code == 0
+    found = json.loads(capsys.readouterr().out)
+    assert [(s["id"], s["model"], s["position"]) for s in found] == [
+        (2, model, position), (5, model, position),
+    ]
+
+
+def test_scan_of_a_missing_port_fails_with_a_message(tmp_path, capsys):
+    code = main(["servos", "scan", "--port", str(tmp_path / "nothing"), "--protocol", "maestro",
+                 "--baud", "115200"])
+    assert code == 1 and "cannot open" in capsys.readouterr().err
+
+
+def test_scan_rejects_nonsense_ids(capsys):
+    with pytest.raises(SystemExit):
+        main(["servos", "scan", "--port", "/dev/null", "--protocol", "herkulex", "--ids", "a-b"])
+    assert "expected ids like 1-20" in capsys.readouterr().err
+
+
+def real_config(tmp_path, port) -> str:
+    path = tmp_path / "kaspar.toml"
+    path.write_text(f"""
+[servos]
+backend = "real"
+
+[[servos.buses]]
+name = "body"
+port = "{port}"
+protocol = "dynamixel1"
+baud = 1000000
+timeout_margin_ms = 100.0
+
+[[servos.joints]]
+name = "left_elbow"
+bus = "body"
+id = 1
+model = "ax-12a"
+range_deg = [-40.0, 40.0]
+group = "left_arm"
+
+[[servos.joints]]
+name = "torso_yaw"
+bus = "body"
+id = 2
+model = "ax-12a"
+range_deg = [-30.0, 30.0]
+offset_deg = 10.0
+""")
+    return str(path)
+
+
+def test_read_prints_every_joint_in_degrees_and_names_the_silent_one(tmp_path, capsys):
+    with Dynamixel1Emulator(tmp_path / "ttyAX", ids=[1, 2]) as emulator:
+        emulator.faults.silent.add(2)
+        code = main(["servos", "read", "--config", real_config(tmp_path, emulator.path), "--json"])
+    rows = {row["joint"]: row for row in json.loads(capsys.readouterr().out)}
+    assert code == 1
+    assert rows["left_elbow"]["position_deg"] == 0.0 and rows["left_elbow"]["status"] == "ok"
+    assert rows["torso_yaw"]["position_deg"] is None
+    assert rows["torso_yaw"]["status"].startswith("silent")
+
+
+def test_read_works_on_the_simulated_servos(tmp_path, capsys):
+    path = tmp_path / "kaspar.toml"
+    path.write_text(real_config(tmp_path, "/dev/none") and
+                    (tmp_path / "kaspar.toml").read_text().replace('"real"', '"sim"'))
+    assert main(["servos", "read", "--config", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "left_elbow" in out and "torso_yaw" in out and out.count("0.0 deg  35 C  ok") == 2
+
+
+def test_check_names_each_missing_servo(tmp_path, capsys, monkeypatch):
+    with Dynamixel1Emulator(tmp_path / "ttyAX", ids=[1]) as emulator:
+        code = main(["check", "--config", real_config(tmp_path, emulator.path)])
+    captured = capsys.readouterr()
+    assert code == 1
+    assert "servo torso_yaw is missing (bus body on" in captured.err and "id 2" in captured.err
+    assert "left_elbow" not in captured.err
+
+
+def test_check_passes_when_every_servo_answers(tmp_path, capsys):
+    with Dynamixel1Emulator(tmp_path / "ttyAX", ids=[1, 2]) as emulator:
+        code = main(["check", "--config", real_config(tmp_path, emulator.path)])
+    assert code == 0 and "all 2 servos answered" in capsys.readouterr().out
+
+
+def test_check_does_not_touch_servos_with_the_sim_backend(tmp_path, capsys):
+    path = tmp_path / "kaspar.toml"
+    path.write_text("[servos]\nbackend = 'sim'\n")
+    assert main(["check", "--config", str(path)]) == 0
+    assert "servos answered" not in capsys.readouterr().out
