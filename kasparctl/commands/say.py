@@ -1,9 +1,68 @@
-"""`kasparctl say`: being built (owned by the say work in progress)."""
+"""`kasparctl say TEXT`: speak a line with Kaspar's voice, or write it to a WAV file."""
 
 from __future__ import annotations
 
+import argparse
+import asyncio
+import os
+import sys
+from pathlib import Path
 from typing import Any
+
+import msgspec
+
+from hal.voice import Voice, WavSink
+from hal.voice_api import Spoken
+from hal.voice_settings import VoiceSettings
+from kasparctl.config import DEFAULT_CONFIG_PATH, ConfigError, load_config
+from kasparctl.log import configure_logging
 
 
 def register(subparsers: Any) -> None:
-    del subparsers
+    parser = subparsers.add_parser("say", help="speak a line (or write it to a WAV file)")
+    parser.add_argument("text", metavar="TEXT", help="what Kaspar says")
+    parser.add_argument("--wav", metavar="FILE", help="write a WAV file instead of playing it")
+    parser.add_argument("--key", help="phrase key: its recorded clip plays if one is configured")
+    parser.add_argument("--engine", choices=("pyttsx3", "espeak-ng"), help="override the engine")
+    parser.add_argument(
+        "--config",
+        default=None,
+        help="kaspar.toml (default: $KASPAR_CONFIG, or /etc/kaspar/kaspar.toml if it exists)",
+    )
+    parser.set_defaults(run=run)
+
+
+def voice_settings(arguments: argparse.Namespace) -> VoiceSettings:
+    path = arguments.config or os.environ.get("KASPAR_CONFIG")
+    if path is None and DEFAULT_CONFIG_PATH.exists():
+        path = str(DEFAULT_CONFIG_PATH)
+    settings = load_config(path).voice if path else VoiceSettings()
+    if arguments.engine:
+        settings = msgspec.structs.replace(settings, engine=arguments.engine)
+    return settings
+
+
+async def speak(settings: VoiceSettings, text: str, key: str | None, wav: str | None) -> Spoken:
+    sink = WavSink(file=Path(wav)) if wav else None
+    voice = Voice(settings, sink=sink)
+    try:
+        return await voice.say(text, key)
+    finally:
+        await voice.close()
+
+
+def run(arguments: argparse.Namespace) -> int:
+    # Warnings (an engine falling back) go to stderr; stdout stays for results.
+    configure_logging("warning", "console", stream=sys.stderr)
+    try:
+        settings = voice_settings(arguments)
+    except ConfigError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    spoken = asyncio.run(speak(settings, arguments.text, arguments.key, arguments.wav))
+    if not spoken.finished:
+        print(f"error: not spoken ({spoken.status.value}): {spoken.error}", file=sys.stderr)
+        return 1
+    if arguments.wav:
+        print(f"wrote {arguments.wav} ({spoken.via})")
+    return 0

@@ -1,0 +1,321 @@
+"""Key downs and ups in, gestures out: a pure recogniser driven by the caller's clock.
+
+The recogniser never reads a clock and never waits. The caller feeds key
+changes with their times (`key`), and calls `advance(now)` when `next_deadline()`
+is reached, which is how a long press is delivered the moment its threshold
+passes rather than at the release.
+
+Latency is the price of meaning. A button's press can be delivered at its
+key-down only when nothing else could still become of it, so each button
+declares what the game listens for (GestureNeeds):
+
+  needs of the button        a press is delivered
+  press only                 at key-down (at key-down + both_window if `both`)
+  press + long               at the release, + bounce
+  press + double (+ long)    at the release + double_press, if no second press came
+
+Long, double and both are delivered as soon as they are certain: long and
+both when the hold reaches long_press, double at the second key-down. Every
+gesture carries `at`, the time of the key-down that began it, so reaction
+times are measured from the child's press, not from the recogniser's decision.
+
+Contact bounce: a release followed by a press within `bounce` is one hold;
+this costs `bounce` on presses decided at the release. Autorepeat (value 2)
+is not a key change at all and is dropped by the reader before it gets here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import structlog
+
+log = structlog.get_logger("kaspar.gestures")
+
+GREEN = "green"
+RED = "red"
+BOTH = "both"
+CHORD = (GREEN, RED)
+
+
+class GestureKind(StrEnum):
+    PRESS = "press"
+    LONG = "long"
+    DOUBLE = "double"
+    BOTH = "both"
+    # An extra key of a keypad, mapped to a researcher command: delivered at key-down.
+    COMMAND = "command"
+
+
+@dataclass(frozen=True, slots=True)
+class Gesture:
+    kind: GestureKind
+    # "green", "red", "both", or the researcher command name of an extra key.
+    button: str
+    # Clock time of the key-down that began the gesture (the first one of a double).
+    at: float
+    # Clock time at which the recogniser was certain; `decided - at` is its latency.
+    decided: float
+
+
+ANSWER = frozenset({GestureKind.PRESS})
+ANSWER_OR_LONG = frozenset({GestureKind.PRESS, GestureKind.LONG})
+EVERYTHING = frozenset({GestureKind.PRESS, GestureKind.LONG, GestureKind.DOUBLE})
+
+
+@dataclass(frozen=True, slots=True)
+class GestureNeeds:
+    """What the game listens for on each button; fewer needs, faster presses."""
+
+    green: frozenset[GestureKind] = EVERYTHING
+    red: frozenset[GestureKind] = EVERYTHING
+    # Green and red held together for long_press (the researcher's stop).
+    both: bool = True
+
+    def of(self, button: str) -> frozenset[GestureKind]:
+        if button == GREEN:
+            return self.green
+        if button == RED:
+            return self.red
+        return ANSWER
+
+
+# The researcher gestures of the design: long green next, long red pause,
+# double red undo, both stop. Green presses wait for the release; red ones
+# also wait out the double-press window.
+RESEARCHER_GESTURES = GestureNeeds(green=ANSWER_OR_LONG, red=EVERYTHING, both=True)
+# Children's answers only (researcher commands on extra keys): presses at key-down.
+ANSWERS_ONLY = GestureNeeds(green=ANSWER, red=ANSWER, both=False)
+
+
+@dataclass(frozen=True, slots=True)
+class GestureTimings:
+    long_press: float = 1.0
+    double_press: float = 0.4
+    bounce: float = 0.03
+    both_window: float = 0.3
+
+    def __post_init__(self) -> None:
+        if not 0 < self.bounce < self.double_press < self.long_press:
+            raise ValueError("expected 0 < bounce < double_press < long_press")
+        if not 0 < self.both_window < self.long_press:
+            raise ValueError("expected 0 < both_window < long_press")
+
+
+@dataclass(slots=True)
+class _Key:
+    needs: frozenset[GestureKind] = frozenset()
+    down_at: float | None = None  # start of the current hold; None when up
+    consumed: bool = False  # the current hold has produced (or forfeited) its gesture
+    release_at: float | None = None  # a release not yet confirmed (bounce gap)
+    press_due: float | None = None  # press-only key waiting out both_window
+    first_at: float | None = None  # a complete press waiting for a possible second
+    first_up: float | None = None
+
+
+@dataclass(slots=True)
+class _Chord:
+    first_at: float
+    second_at: float
+    fired: bool = False
+    broken: bool = False  # one of the two was let go
+
+
+@dataclass
+class GestureRecognizer:
+    """Pure state machine; see the module docstring for the rules."""
+
+    timings: GestureTimings = field(default_factory=GestureTimings)
+    needs: GestureNeeds = field(default_factory=GestureNeeds)
+    commands: Iterable[str] = ()
+    _keys: dict[str, _Key] = field(init=False)
+    _chord: _Chord | None = field(init=False, default=None)
+    _now: float = field(init=False, default=float("-inf"))
+
+    def __post_init__(self) -> None:
+        self.commands = frozenset(self.commands)
+        self._keys = {name: _Key() for name in (*CHORD, *sorted(self.commands))}
+
+    def set_needs(self, needs: GestureNeeds) -> None:
+        """Takes effect at each button's next key-down; a gesture in progress keeps its rules."""
+        self.needs = needs
+
+    @property
+    def buttons(self) -> tuple[str, ...]:
+        return tuple(self._keys)
+
+    def held(self) -> tuple[str, ...]:
+        return tuple(name for name, key in self._keys.items() if key.down_at is not None)
+
+    def key(self, button: str, down: bool, at: float) -> list[Gesture]:
+        """A key change of `button` at clock time `at`; returns the gestures now certain."""
+        if button not in self._keys:
+            raise ValueError(f"unknown button {button!r}; expected one of {', '.join(self._keys)}")
+        out = self.advance(at)
+        at = self._now
+        key = self._keys[button]
+        if down:
+            self._down(button, key, at, out)
+        else:
+            self._up(key, at)
+        out.extend(self.advance(at))
+        return out
+
+    def next_deadline(self) -> float | None:
+        """The clock time at which `advance` may have something to deliver."""
+        due = [deadline for _, deadline in self._deadlines()]
+        return min(due) if due else None
+
+    def advance(self, now: float) -> list[Gesture]:
+        """Deliver every gesture whose time has come by `now`, in time order."""
+        self._now = max(self._now, now)
+        out: list[Gesture] = []
+        while True:
+            due = self._deadlines()
+            ready = [(deadline, action) for action, deadline in due if deadline <= self._now]
+            if not ready:
+                return out
+            deadline, action = min(ready, key=lambda item: item[0])
+            self._fire(action, deadline, out)
+
+    def reset(self) -> list[Gesture]:
+        """The keyfob is gone: holds are dropped, complete presses still count."""
+        out: list[Gesture] = []
+        for name, key in self._keys.items():
+            if key.first_at is not None:
+                out.append(self._gesture(GestureKind.PRESS, name, key.first_at, self._now))
+            self._keys[name] = _Key()
+        if self._chord is not None and not self._chord.fired:
+            log.info("gesture dropped", reason="keyfob lost while both were held")
+        self._chord = None
+        return out
+
+    # -- key changes --------------------------------------------------------
+
+    def _down(self, name: str, key: _Key, at: float, out: list[Gesture]) -> None:
+        if key.release_at is not None:
+            # Bounce: the release did not happen; the hold goes on.
+            key.release_at = None
+            return
+        if key.down_at is not None:
+            return  # a second down without an up: the reader missed an up; keep the hold
+        if key.first_at is not None and GestureKind.DOUBLE in key.needs:
+            first = key.first_at
+            key.first_at = key.first_up = None
+            key.down_at, key.consumed = at, True
+            out.append(self._gesture(GestureKind.DOUBLE, name, first, at))
+            return
+        key.needs = self.needs.of(name)
+        key.down_at, key.consumed, key.press_due = at, False, None
+        if self._chord is not None and name in CHORD:
+            key.consumed = True  # pressed again during a chord: still part of the mash
+            return
+        if self._starts_chord(name, at):
+            return
+        if not key.needs:
+            key.consumed = True
+        elif key.needs == ANSWER:
+            if self.needs.both and name in CHORD:
+                key.press_due = at + self.timings.both_window
+            else:
+                key.consumed = True
+                out.append(self._gesture(self._press_kind(name), name, at, at))
+
+    def _starts_chord(self, name: str, at: float) -> bool:
+        if not self.needs.both or name not in CHORD or self._chord is not None:
+            return False
+        other = self._keys[RED if name == GREEN else GREEN]
+        if (
+            other.down_at is None
+            or other.consumed
+            or other.release_at is not None
+            or at - other.down_at > self.timings.both_window
+        ):
+            return False
+        self._chord = _Chord(first_at=other.down_at, second_at=at)
+        for chord_key in (self._keys[GREEN], self._keys[RED]):
+            chord_key.consumed, chord_key.press_due = True, None
+        return True
+
+    def _up(self, key: _Key, at: float) -> None:
+        if key.down_at is not None and key.release_at is None:
+            key.release_at = at
+
+    # -- deadlines ----------------------------------------------------------
+
+    def _deadlines(self) -> list[tuple[tuple[str, str], float]]:
+        timings = self.timings
+        due: list[tuple[tuple[str, str], float]] = []
+        for name, key in self._keys.items():
+            if key.release_at is not None:
+                due.append((("release", name), key.release_at + timings.bounce))
+                continue
+            if key.down_at is not None and not key.consumed:
+                if GestureKind.LONG in key.needs:
+                    due.append((("long", name), key.down_at + timings.long_press))
+                if key.press_due is not None:
+                    due.append((("press_due", name), key.press_due))
+            if key.first_up is not None:
+                due.append((("single", name), key.first_up + timings.double_press))
+        chord = self._chord
+        if chord is not None and not chord.fired and not chord.broken and self._chord_held():
+            due.append((("both", BOTH), chord.second_at + timings.long_press))
+        return due
+
+    def _chord_held(self) -> bool:
+        return all(self._keys[name].release_at is None for name in CHORD)
+
+    def _fire(self, action: tuple[str, str], deadline: float, out: list[Gesture]) -> None:
+        kind, name = action
+        if kind == "both":
+            assert self._chord is not None
+            self._chord.fired = True
+            out.append(self._gesture(GestureKind.BOTH, BOTH, self._chord.first_at, deadline))
+            return
+        key = self._keys[name]
+        if kind == "release":
+            released = key.release_at if key.release_at is not None else deadline
+            self._release(name, key, released, out)
+        elif kind == "long":
+            key.consumed = True
+            assert key.down_at is not None
+            out.append(self._gesture(GestureKind.LONG, name, key.down_at, deadline))
+        elif kind == "press_due":
+            key.consumed, key.press_due = True, None
+            assert key.down_at is not None
+            out.append(self._gesture(GestureKind.PRESS, name, key.down_at, deadline))
+        elif kind == "single":
+            assert key.first_at is not None
+            if GestureKind.PRESS in key.needs:
+                out.append(self._gesture(GestureKind.PRESS, name, key.first_at, deadline))
+            key.first_at = key.first_up = None
+
+    def _release(self, name: str, key: _Key, released: float, out: list[Gesture]) -> None:
+        down_at, consumed = key.down_at, key.consumed
+        key.down_at, key.release_at, key.press_due, key.consumed = None, None, None, False
+        chord = self._chord
+        if chord is not None and name in CHORD:
+            # Nothing comes of a chord let go early: a child mashing both buttons
+            # has given no answer, and the researcher's stop needs the full hold.
+            if not chord.fired and not chord.broken:
+                log.info("gesture dropped", reason="green and red held together too briefly")
+            chord.broken = True
+            if all(self._keys[other].down_at is None for other in CHORD):
+                self._chord = None
+            return
+        if consumed or down_at is None:
+            return
+        if GestureKind.DOUBLE in key.needs:
+            key.first_at, key.first_up = down_at, released
+        elif GestureKind.PRESS in key.needs:
+            decided = released + self.timings.bounce
+            out.append(self._gesture(self._press_kind(name), name, down_at, decided))
+
+    def _press_kind(self, name: str) -> GestureKind:
+        return GestureKind.COMMAND if name in self.commands else GestureKind.PRESS
+
+    @staticmethod
+    def _gesture(kind: GestureKind, button: str, at: float, decided: float) -> Gesture:
+        return Gesture(kind=kind, button=button, at=at, decided=decided)

@@ -1,0 +1,57 @@
+"""What the game sees of the keyfob: one stream of gestures and keyfob-lost/back events.
+
+The real keyfob (hal.keyfob.Keyfob) and its simulated twins
+(hal.sim_keyfob) all satisfy KeyfobInput; the game imports only this module
+and hal.gestures.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+from hal.gestures import Gesture, GestureNeeds
+
+
+@dataclass(frozen=True, slots=True)
+class KeyfobLost:
+    """The keyfob stopped answering (unplugged, battery, out of range); reopening goes on."""
+
+    at: float
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class KeyfobBack:
+    """The keyfob is read again; keys held while it was away are forgotten."""
+
+    at: float
+    device: str
+
+
+InputEvent = Gesture | KeyfobLost | KeyfobBack
+
+
+class KeyfobInput(Protocol):
+    """A keyfob as a stream of InputEvent, in the order they became certain."""
+
+    async def start(self) -> None:
+        """Open the keyfob (or start watching for it); returns without waiting for it."""
+        ...
+
+    async def next_event(self) -> InputEvent:
+        """The next gesture or lost/back event; waits as long as it takes."""
+        ...
+
+    def set_needs(self, needs: GestureNeeds) -> None:
+        """Which gestures the game listens for; fewer needs deliver presses sooner."""
+        ...
+
+    @property
+    def connected(self) -> bool:
+        """True while the keyfob is open and read."""
+        ...
+
+    async def close(self) -> None:
+        """Stop reading and release the device; idempotent."""
+        ...

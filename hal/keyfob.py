@@ -1,0 +1,373 @@
+"""The keyfob through evdev: key map, gestures, unplug and return.
+
+Reading happens on the event loop: the device's non-blocking fd is registered
+with loop.add_reader and each wake-up reads one batch with evdev's own
+InputDevice.read(). evdev's async_read_loop() is not used because it adds and
+removes the reader for every batch, turns a spurious wake-up (EAGAIN) into an
+exception that ends the iteration, and cannot express end-of-file; here a
+single reader stays registered until the device is lost, then is removed
+exactly once.
+
+Times: the kernel stamps events with the wall clock unless told otherwise,
+and the game runs on an injected clock, so each batch is anchored to
+clock.now() at the read, keeping the kernel's spacing between the events
+of the batch (which is what tells a bounce from a press when the loop was busy).
+
+Unplug: read() raises OSError(ENODEV) (a pipe in tests gives end-of-file);
+either way the reader is removed, held keys are forgotten, KeyfobLost is
+queued, and /dev/input is watched with inotify (netlink is not allowed to the
+hardened service) until the device can be opened again. udev applies the
+group and mode a moment after it creates the node, so a PermissionError is
+retried for `reopen_grace` seconds (and an IN_ATTRIB event retries at once).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import ctypes
+import ctypes.util
+import errno
+import os
+import struct
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any, Protocol
+
+import structlog
+
+from hal.clock import Clock
+from hal.errors import HalError
+from hal.gestures import Gesture, GestureNeeds, GestureRecognizer, GestureTimings
+from hal.input_api import InputEvent, KeyfobBack, KeyfobLost
+from hal.keyfob_settings import KeyfobSettings
+
+log = structlog.get_logger("kaspar.keyfob")
+
+EV_SYN, EV_KEY = 0x00, 0x01
+SYN_REPORT, SYN_DROPPED = 0, 3
+KEY_UP, KEY_DOWN, KEY_REPEAT = 0, 1, 2
+
+
+class KeyfobError(HalError):
+    """The keyfob cannot be found or opened (it is retried; this names why)."""
+
+
+class EvdevEvent(Protocol):
+    type: int
+    code: int
+    value: int
+
+    def timestamp(self) -> float: ...
+
+
+class EvdevDevice(Protocol):
+    """The part of evdev.InputDevice the keyfob uses."""
+
+    path: str
+    name: str
+
+    def fileno(self) -> int: ...
+    def read(self) -> Iterable[EvdevEvent]: ...
+    def grab(self) -> None: ...
+    def close(self) -> None: ...
+
+
+def open_evdev(path: str) -> EvdevDevice:
+    import evdev
+
+    return evdev.InputDevice(path)
+
+
+class Keyfob:
+    """The real keyfob; satisfies hal.input_api.KeyfobInput."""
+
+    def __init__(
+        self,
+        settings: KeyfobSettings,
+        clock: Clock,
+        *,
+        needs: GestureNeeds | None = None,
+        opener: Callable[[str], EvdevDevice] = open_evdev,
+        input_dir: str = "/dev/input",
+        retry_every: float = 5.0,
+    ) -> None:
+        self._settings = settings
+        self._clock = clock
+        self._opener = opener
+        self._input_dir = input_dir
+        # Safety net under inotify: look again now and then, in case an event was missed.
+        self._retry_every = retry_every
+        self._key_map = settings.key_map()
+        commands = [name for name in self._key_map.values() if name not in ("green", "red")]
+        timings = GestureTimings(
+            long_press=settings.long_press,
+            double_press=settings.double_press,
+            bounce=settings.bounce,
+            both_window=settings.both_window,
+        )
+        self._recogniser = GestureRecognizer(timings, needs or GestureNeeds(), commands=commands)
+        self._events: asyncio.Queue[InputEvent] = asyncio.Queue()
+        self._device: EvdevDevice | None = None
+        self._fd = -1
+        self._timer: asyncio.Task[None] | None = None
+        self._watch: asyncio.Task[None] | None = None
+        self._last_time = float("-inf")
+        self._dropping = False
+        self._unknown_codes: set[int] = set()
+        self._closed = False
+
+    # -- KeyfobInput --------------------------------------------------------
+
+    async def start(self) -> None:
+        try:
+            self._open()
+        except (OSError, KeyfobError) as error:
+            self._report_lost(f"not available at start: {_describe(error)}")
+
+    async def next_event(self) -> InputEvent:
+        return await self._events.get()
+
+    def set_needs(self, needs: GestureNeeds) -> None:
+        self._recogniser.set_needs(needs)
+
+    @property
+    def connected(self) -> bool:
+        return self._device is not None
+
+    async def close(self) -> None:
+        self._closed = True
+        for task in (self._timer, self._watch):
+            if task is not None:
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+        self._timer = self._watch = None
+        self._drop_device()
+
+    # -- opening ------------------------------------------------------------
+
+    def _open_device(self) -> EvdevDevice:
+        path = self._settings.device_path
+        if path is not None:
+            return self._opener(path)
+        wanted = self._settings.name
+        for entry in sorted(Path(self._input_dir).glob("event*")):
+            try:
+                device = self._opener(str(entry))
+            except OSError:
+                continue
+            if device.name == wanted:
+                return device  # kept open: opening again could race an unplug
+            device.close()
+        raise KeyfobError(f"no input device named {wanted!r} in {self._input_dir}")
+
+    def _open(self) -> None:
+        device = self._open_device()
+        path = device.path
+        try:
+            if self._settings.grab:
+                try:
+                    device.grab()
+                except OSError as error:
+                    # Still usable, but its keys also reach whoever else holds it.
+                    log.warning("keyfob not grabbed", device=path, error=_describe(error))
+            fd = device.fileno()
+            asyncio.get_running_loop().add_reader(fd, self._on_readable)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                device.close()
+            raise
+        self._device, self._fd = device, fd
+        log.info("keyfob open", device=path, name=device.name)
+
+    def _drop_device(self) -> None:
+        if self._device is None:
+            return
+        with contextlib.suppress(RuntimeError):  # the loop may already be closed
+            asyncio.get_running_loop().remove_reader(self._fd)
+        with contextlib.suppress(OSError):
+            self._device.close()
+        self._device, self._fd = None, -1
+
+    # -- reading ------------------------------------------------------------
+
+    def _on_readable(self) -> None:
+        device = self._device
+        if device is None:
+            return
+        try:
+            batch = list(device.read())
+        except BlockingIOError:
+            return  # woken with nothing to read
+        except OSError as error:
+            self._lose(_describe(error))
+            return
+        if not batch:
+            self._lose("end of file")
+            return
+        now = self._clock.now()
+        newest = batch[-1].timestamp()
+        gestures: list[Gesture] = []
+        for event in batch:
+            at = max(self._last_time, now - max(0.0, newest - event.timestamp()))
+            self._last_time = at
+            gestures += self._on_event(event, at)
+        self._publish(gestures)
+
+    def _on_event(self, event: EvdevEvent, at: float) -> list[Gesture]:
+        if event.type == EV_SYN:
+            if event.code == SYN_DROPPED:
+                # The kernel's buffer overflowed: which keys are down is unknown
+                # until the next report, so forget the holds rather than guess.
+                log.warning("keyfob events dropped by the kernel")
+                self._dropping = True
+                return self._recogniser.reset()
+            if event.code == SYN_REPORT:
+                self._dropping = False
+            return []
+        if event.type != EV_KEY or self._dropping or event.value == KEY_REPEAT:
+            return []
+        button = self._key_map.get(event.code)
+        if button is None:
+            if event.code not in self._unknown_codes:
+                self._unknown_codes.add(event.code)
+                log.info("keyfob key not mapped", code=event.code)
+            return []
+        return self._recogniser.key(button, event.value == KEY_DOWN, at)
+
+    def _publish(self, gestures: list[Gesture]) -> None:
+        for gesture in gestures:
+            self._events.put_nowait(gesture)
+        self._schedule()
+
+    def _schedule(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        deadline = self._recogniser.next_deadline()
+        if deadline is not None and not self._closed:
+            self._timer = asyncio.get_running_loop().create_task(self._wait_until(deadline))
+
+    async def _wait_until(self, deadline: float) -> None:
+        await self._clock.sleep(max(0.0, deadline - self._clock.now()))
+        self._timer = None
+        self._publish(self._recogniser.advance(self._clock.now()))
+
+    # -- lost and back ------------------------------------------------------
+
+    def _lose(self, reason: str) -> None:
+        log.warning("keyfob lost", reason=reason)
+        self._drop_device()
+        self._publish(self._recogniser.reset())
+        self._report_lost(reason)
+
+    def _report_lost(self, reason: str) -> None:
+        self._events.put_nowait(KeyfobLost(at=self._clock.now(), reason=reason))
+        if self._watch is None and not self._closed:
+            self._watch = asyncio.get_running_loop().create_task(self._reopen())
+
+    async def _reopen(self) -> None:
+        watched = [self._input_dir]
+        path = self._settings.device_path
+        if path is not None and str(Path(path).parent) != self._input_dir:
+            watched.append(str(Path(path).parent))  # /dev/input/by-id comes and goes
+        grace_until: float | None = None
+        try:
+            with DirectoryWatch(watched) as watch:
+                while not self._closed:
+                    try:
+                        self._open()
+                    except PermissionError as error:
+                        # The node exists but udev has not set its group yet.
+                        now = self._clock.now()
+                        grace_until = grace_until or now + self._settings.reopen_grace
+                        if now < grace_until:
+                            await self._clock.sleep(0.1)
+                            continue
+                        log.warning("keyfob not readable", error=_describe(error))
+                        grace_until = None
+                    except (OSError, KeyfobError) as error:
+                        log.debug("keyfob still away", error=_describe(error))
+                    except Exception as error:
+                        # Not expected from a device node, but the watch must outlive it.
+                        log.error("keyfob reopen failed", error=repr(error))
+                    else:
+                        assert self._device is not None
+                        self._events.put_nowait(
+                            KeyfobBack(at=self._clock.now(), device=self._device.path)
+                        )
+                        return
+                    await watch.changed(self._retry_every)
+        finally:
+            self._watch = None
+
+
+class DirectoryWatch:
+    """inotify on a few directories: `changed()` returns when any of them changes.
+
+    ctypes over libc rather than a dependency; a directory that does not
+    exist yet is added when it appears (checked at every change).
+    """
+
+    _MASK = 0x00000004 | 0x00000080 | 0x00000100 | 0x00000200  # ATTRIB MOVED_TO CREATE DELETE
+    _IN_NONBLOCK, _IN_CLOEXEC = os.O_NONBLOCK, 0o2000000
+
+    def __init__(self, directories: Iterable[str]) -> None:
+        self._directories = list(directories)
+        self._libc: Any = None
+        self._fd = -1
+        self._changed: asyncio.Event | None = None
+
+    def __enter__(self) -> DirectoryWatch:
+        self._changed = asyncio.Event()
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        fd = libc.inotify_init1(self._IN_NONBLOCK | self._IN_CLOEXEC)
+        if fd < 0:
+            # Without inotify the periodic retry still finds the keyfob, only later.
+            log.warning("inotify unavailable", error=os.strerror(ctypes.get_errno()))
+            return self
+        self._libc, self._fd = libc, fd
+        self._add_watches()
+        asyncio.get_running_loop().add_reader(fd, self._on_readable)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._fd >= 0:
+            asyncio.get_running_loop().remove_reader(self._fd)
+            os.close(self._fd)
+            self._fd = -1
+
+    def _add_watches(self) -> None:
+        for directory in self._directories:
+            # Adding an existing watch again is harmless: inotify returns the same one.
+            self._libc.inotify_add_watch(self._fd, os.fsencode(directory), self._MASK)
+
+    def _on_readable(self) -> None:
+        try:
+            data = os.read(self._fd, 65536)
+        except BlockingIOError:
+            return
+        names = []
+        offset = 0
+        while offset + 16 <= len(data):
+            _wd, _mask, _cookie, length = struct.unpack_from("iIII", data, offset)
+            names.append(data[offset + 16 : offset + 16 + length].rstrip(b"\0"))
+            offset += 16 + length
+        log.debug("input directory changed", names=[n.decode(errors="replace") for n in names])
+        self._add_watches()
+        assert self._changed is not None
+        self._changed.set()
+
+    async def changed(self, timeout: float) -> None:
+        """Wait for a change, or `timeout` seconds (the safety net)."""
+        assert self._changed is not None
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._changed.wait(), timeout)
+        self._changed.clear()
+
+
+def _describe(error: BaseException) -> str:
+    if isinstance(error, OSError) and error.errno is not None:
+        return f"{errno.errorcode.get(error.errno, error.errno)}: {error.strerror}"
+    return str(error)

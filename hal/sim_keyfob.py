@@ -1,0 +1,253 @@
+"""Simulated keyfobs: a scripted one for tests and the demo, and one driven from the terminal.
+
+Both press simulated keys into the real GestureRecognizer on the injected
+clock, so the game sees the same gestures, in the same order and with the
+same latencies (a red press waits out its double-press window) as from the
+real keyfob. With a virtual clock a whole script runs in no real time.
+
+Actions: "green", "red", "long green", "long red", "double green",
+"double red", "both", "command NAME", "lost", "back".
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import sys
+from collections.abc import Iterable
+from typing import TextIO
+
+from hal.clock import Clock
+from hal.gestures import GREEN, RED, Gesture, GestureNeeds, GestureRecognizer, GestureTimings
+from hal.input_api import InputEvent, KeyfobBack, KeyfobLost
+
+PRESS_HOLD = 0.1  # a child's short press
+PRESS_GAP = 0.1  # between the two presses of a double
+CHORD_LAG = 0.05  # the second button of "both", a little after the first
+
+ACTIONS = (
+    "green",
+    "red",
+    "long green",
+    "long red",
+    "double green",
+    "double red",
+    "both",
+    "lost",
+    "back",
+)
+_ACTION_LIST = ", ".join([*ACTIONS, "command NAME"])
+
+
+class SimKeyfob:
+    """A keyfob whose keys are pressed by `perform`; satisfies hal.input_api.KeyfobInput."""
+
+    def __init__(
+        self,
+        clock: Clock,
+        *,
+        timings: GestureTimings | None = None,
+        needs: GestureNeeds | None = None,
+        commands: Iterable[str] = (),
+    ) -> None:
+        self._clock = clock
+        self._timings = timings or GestureTimings()
+        self._recogniser = GestureRecognizer(
+            self._timings, needs or GestureNeeds(), commands=commands
+        )
+        self._events: asyncio.Queue[InputEvent] = asyncio.Queue()
+        self._lock = asyncio.Lock()
+        self._connected = True
+        self._closed = False
+
+    async def start(self) -> None:
+        pass
+
+    async def next_event(self) -> InputEvent:
+        return await self._events.get()
+
+    def set_needs(self, needs: GestureNeeds) -> None:
+        self._recogniser.set_needs(needs)
+
+    @property
+    def connected(self) -> bool:
+        return self._connected
+
+    async def close(self) -> None:
+        self._closed = True
+
+    async def perform(self, action: str) -> None:
+        """Press the keys of one action, then wait until its gestures are certain."""
+        async with self._lock:
+            for step in self._steps(action):
+                if isinstance(step, float):
+                    await self._wait(step)
+                else:
+                    button, down = step
+                    self._publish(self._recogniser.key(button, down, self._clock.now()))
+            await self._settle()
+
+    def _steps(self, action: str) -> list[float | tuple[str, bool]]:
+        words = action.split()
+        hold_long = self._timings.long_press + 0.2
+        if words[:1] == ["command"] and len(words) == 2:
+            return [(words[1], True), PRESS_HOLD, (words[1], False)]
+        if action in (GREEN, RED):
+            return [(action, True), PRESS_HOLD, (action, False)]
+        if len(words) == 2 and words[1] in (GREEN, RED) and words[0] in ("long", "double"):
+            button = words[1]
+            if words[0] == "long":
+                return [(button, True), hold_long, (button, False)]
+            press: list[float | tuple[str, bool]] = [(button, True), PRESS_HOLD, (button, False)]
+            return [*press, PRESS_GAP, *press]
+        if action == "both":
+            return [(GREEN, True), CHORD_LAG, (RED, True), hold_long, (GREEN, False), (RED, False)]
+        if action == "lost":
+            self._connected = False
+            self._publish(self._recogniser.reset())
+            self._events.put_nowait(KeyfobLost(at=self._clock.now(), reason="simulated"))
+            return []
+        if action == "back":
+            self._connected = True
+            self._events.put_nowait(KeyfobBack(at=self._clock.now(), device="simulated"))
+            return []
+        raise ValueError(f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}")
+
+    async def _wait(self, seconds: float) -> None:
+        """Sleep on the clock, delivering any gesture whose time comes meanwhile."""
+        until = self._clock.now() + seconds
+        while (deadline := self._recogniser.next_deadline()) is not None and deadline <= until:
+            await self._clock.sleep(max(0.0, deadline - self._clock.now()))
+            self._publish(self._recogniser.advance(deadline))
+        await self._clock.sleep(max(0.0, until - self._clock.now()))
+
+    async def _settle(self) -> None:
+        while (deadline := self._recogniser.next_deadline()) is not None:
+            await self._clock.sleep(max(0.0, deadline - self._clock.now()))
+            self._publish(self._recogniser.advance(deadline))
+
+    def _publish(self, gestures: list[Gesture]) -> None:
+        if not self._connected:
+            return
+        for gesture in gestures:
+            self._events.put_nowait(gesture)
+
+
+class ScriptedKeyfob(SimKeyfob):
+    """Plays a script of (seconds to wait, action) from start(); for tests and the demo."""
+
+    def __init__(
+        self, script: Iterable[tuple[float, str]] | str, clock: Clock, **options: object
+    ) -> None:
+        super().__init__(clock, **options)  # type: ignore[arg-type]
+        self._script = parse_script(script) if isinstance(script, str) else list(script)
+        for _, action in self._script:
+            self._steps_check(action)
+        self._task: asyncio.Task[None] | None = None
+        self.done = asyncio.Event()
+
+    def _steps_check(self, action: str) -> None:
+        words = action.split()
+        if action not in ACTIONS and not (words[:1] == ["command"] and len(words) == 2):
+            raise ValueError(f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}")
+
+    async def start(self) -> None:
+        self._task = asyncio.get_running_loop().create_task(self._play())
+
+    async def _play(self) -> None:
+        for delay, action in self._script:
+            await self._clock.sleep(delay)
+            await self.perform(action)
+        self.done.set()
+
+    async def close(self) -> None:
+        await super().close()
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+
+
+def parse_script(text: str) -> list[tuple[float, str]]:
+    """ "1.5 green; 0.5 long red" -> [(1.5, "green"), (0.5, "long red")]."""
+    script = []
+    for part in text.replace("\n", ";").split(";"):
+        part = part.strip()
+        if not part:
+            continue
+        delay, _, action = part.partition(" ")
+        try:
+            script.append((float(delay), action.strip()))
+        except ValueError as error:
+            raise ValueError(f"expected 'SECONDS ACTION', found {part!r}") from error
+    return script
+
+
+# Keys of the terminal keyfob.
+TERMINAL_KEYS = {
+    "g": "green",
+    "r": "red",
+    "G": "long green",
+    "R": "long red",
+    "d": "double red",
+    "D": "double green",
+    "b": "both",
+    "l": "lost",
+    "k": "back",
+}
+TERMINAL_HELP = (
+    "keyfob: g green, r red, G long green, R long red, d double red, "
+    "D double green, b both, l lost, k back"
+)
+
+
+class TerminalKeyfob(SimKeyfob):
+    """Keys typed in the terminal become keyfob actions (one character each)."""
+
+    def __init__(self, clock: Clock, stream: TextIO | None = None, **options: object) -> None:
+        super().__init__(clock, **options)  # type: ignore[arg-type]
+        self._stream = stream or sys.stdin
+        self._saved_mode: list[object] | None = None
+        self._pending: asyncio.Queue[str] = asyncio.Queue()
+        self._task: asyncio.Task[None] | None = None
+
+    async def start(self) -> None:
+        fd = self._stream.fileno()
+        if os.isatty(fd):
+            import termios
+            import tty
+
+            self._saved_mode = termios.tcgetattr(fd)
+            tty.setcbreak(fd)  # one key at a time, no Enter; Ctrl-C still works
+        print(TERMINAL_HELP, file=sys.stderr)
+        asyncio.get_running_loop().add_reader(fd, self._on_key)
+        self._task = asyncio.get_running_loop().create_task(self._perform_keys())
+
+    def _on_key(self) -> None:
+        data = os.read(self._stream.fileno(), 64).decode(errors="ignore")
+        if not data:
+            asyncio.get_running_loop().remove_reader(self._stream.fileno())
+            return
+        for char in data:
+            action = TERMINAL_KEYS.get(char)
+            if action is not None:
+                self._pending.put_nowait(action)
+
+    async def _perform_keys(self) -> None:
+        while True:
+            await self.perform(await self._pending.get())
+
+    async def close(self) -> None:
+        await super().close()
+        fd = self._stream.fileno()
+        asyncio.get_running_loop().remove_reader(fd)
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+        if self._saved_mode is not None:
+            import termios
+
+            termios.tcsetattr(fd, termios.TCSADRAIN, self._saved_mode)
+            self._saved_mode = None

@@ -1,0 +1,101 @@
+"""The simulated voice: each line printed with its clock time, for as long as it would take to say.
+
+Optionally it also speaks (or writes WAV files) through a real voice, e.g.
+hal.voice.Voice with engine "espeak-ng", so the demo can be heard.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Mapping
+from typing import TextIO
+
+from hal.clock import Clock
+from hal.voice_api import Spoken, SpokenStatus, VoiceOutput
+
+PAUSE_AFTER_LINE = 0.3
+
+
+def speaking_time(text: str, rate: int) -> float:
+    """Seconds a line takes at `rate` words per minute, with a short pause after it."""
+    return len(text.split()) * 60.0 / rate + PAUSE_AFTER_LINE
+
+
+class SimVoice:
+    """Satisfies hal.voice_api.VoiceOutput without a sound card."""
+
+    def __init__(
+        self,
+        stream: TextIO,
+        clock: Clock,
+        *,
+        rate: int = 150,
+        also: VoiceOutput | None = None,
+        prefix: str = "Kaspar",
+        clips: Mapping[str, str] | None = None,
+    ) -> None:
+        self._stream = stream
+        self._clock = clock
+        self._rate = rate
+        self._also = also
+        self._prefix = prefix
+        self._clips = dict(clips or {})
+        self._turn = asyncio.Lock()
+        self._current: asyncio.Task[None] | None = None
+        self._cancelled_at = 0  # lines queued before the last cancel() are dropped
+        self._serial = 0
+        self.lines: list[Spoken] = []
+
+    async def say(self, text: str, key: str | None = None) -> Spoken:
+        self._serial += 1
+        serial = self._serial
+        async with self._turn:
+            started = self._clock.now()
+            if serial <= self._cancelled_at:
+                return self._record(SpokenStatus.CANCELLED, text, started)
+            # The game names every line's phrase key; only a configured clip replaces TTS.
+            clip = f" [clip {key}]" if key is not None and key in self._clips else ""
+            self._stream.write(f"[{started:10.3f}] {self._prefix}: {text}{clip}\n")
+            self._stream.flush()
+            self._current = asyncio.get_running_loop().create_task(self._speak(text, key))
+            try:
+                await asyncio.wait({self._current})
+            finally:
+                if not self._current.done():
+                    self._current.cancel()  # our caller was cancelled
+                    await asyncio.wait({self._current})
+            cancelled = self._current.cancelled()
+            self._current = None
+        status = SpokenStatus.CANCELLED if cancelled else SpokenStatus.FINISHED
+        return self._record(status, text, started)
+
+    async def _speak(self, text: str, key: str | None) -> None:
+        waits = [self._clock.sleep(speaking_time(text, self._rate))]
+        if self._also is not None:
+            waits.append(self._also_say(text, key))
+        await asyncio.gather(*waits)
+
+    async def _also_say(self, text: str, key: str | None) -> None:
+        assert self._also is not None
+        try:
+            await self._also.say(text, key)
+        except asyncio.CancelledError:
+            self._also.cancel()
+            raise
+
+    def _record(self, status: SpokenStatus, text: str, started: float) -> Spoken:
+        spoken = Spoken(status, text, "sim", started, self._clock.now())
+        self.lines.append(spoken)
+        return spoken
+
+    def cancel(self) -> None:
+        self._cancelled_at = self._serial
+        if self._current is not None:
+            self._current.cancel()
+
+    async def close(self) -> None:
+        self.cancel()
+        if self._also is not None:
+            with contextlib.suppress(Exception):
+                await self._also.close()

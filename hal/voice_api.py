@@ -1,0 +1,57 @@
+"""What the game sees of Kaspar's voice: say, cancel, close.
+
+The real voice (hal.voice.Voice) and the simulated one (hal.sim_voice.SimVoice)
+both satisfy VoiceOutput. Speech failures are not exceptions: a session must
+go on when the voice fails, so say() returns a Spoken record naming what
+happened, and the game records the ones that are not "finished".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Protocol
+
+
+class SpokenStatus(StrEnum):
+    FINISHED = "finished"
+    # cancel() was called, or the task awaiting say() was cancelled.
+    CANCELLED = "cancelled"
+    # Cut at the utterance timeout; the engine has been recovered.
+    TIMED_OUT = "timed_out"
+    # Every engine failed (the error says why); nothing was heard.
+    FAILED = "failed"
+
+
+@dataclass(frozen=True, slots=True)
+class Spoken:
+    status: SpokenStatus
+    text: str
+    # "pyttsx3", "espeak-ng", "clip" or "sim"; None when nothing was produced.
+    via: str | None
+    started: float
+    ended: float
+    # The WAV file written, when the voice writes files instead of playing them.
+    wav: str | None = None
+    error: str | None = None
+
+    @property
+    def finished(self) -> bool:
+        return self.status is SpokenStatus.FINISHED
+
+
+class VoiceOutput(Protocol):
+    async def say(self, text: str, key: str | None = None) -> Spoken:
+        """Speak `text` (or the recorded clip for phrase `key`) after what is already queued.
+
+        Returns when the utterance has finished, was cancelled, timed out or failed.
+        """
+        ...
+
+    def cancel(self) -> None:
+        """Stop talking now and drop everything queued (the researcher paused)."""
+        ...
+
+    async def close(self) -> None:
+        """Cancel, then release the engine; idempotent."""
+        ...

@@ -1,0 +1,164 @@
+"""The simulated keyfob and voice: same gestures as the real keyfob, lines on the clock."""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import os
+import shutil
+
+import pytest
+
+from hal.gestures import ANSWERS_ONLY, Gesture, GestureKind, GestureTimings
+from hal.input_api import KeyfobBack, KeyfobLost
+from hal.sim_keyfob import ScriptedKeyfob, SimKeyfob, TerminalKeyfob, parse_script
+from hal.sim_voice import SimVoice, speaking_time
+from hal.voice import Voice
+from hal.voice_api import SpokenStatus
+from hal.voice_settings import VoiceSettings
+
+WAIT = 10.0
+
+
+class JumpClock:
+    """Virtual time: sleeping jumps ahead at once."""
+
+    def __init__(self) -> None:
+        self.t = 500.0
+
+    def now(self) -> float:
+        return self.t
+
+    async def sleep(self, seconds: float) -> None:
+        self.t += max(0.0, seconds)
+        await asyncio.sleep(0)
+
+
+async def drain(keyfob, count: int):
+    return [await asyncio.wait_for(keyfob.next_event(), WAIT) for _ in range(count)]
+
+
+def describe(event) -> str:
+    if isinstance(event, Gesture):
+        return f"{event.kind.value} {event.button}"
+    return type(event).__name__
+
+
+async def test_script_gives_every_gesture_of_the_real_keyfob():
+    clock = JumpClock()
+    script = (
+        "1 green; 1 red; 1 long green; 1 long red; 1 double red; 1 both; "
+        "1 lost; 1 back; 1 command pause"
+    )
+    keyfob = ScriptedKeyfob(script, clock, commands=("pause",))
+    await keyfob.start()
+    events = await drain(keyfob, 9)
+    await asyncio.wait_for(keyfob.done.wait(), WAIT)
+    await keyfob.close()
+    assert [describe(e) for e in events] == [
+        "press green",
+        "press red",
+        "long green",
+        "long red",
+        "double red",
+        "both both",
+        "KeyfobLost",
+        "KeyfobBack",
+        "command pause",
+    ]
+    gestures = [e for e in events if isinstance(e, Gesture)]
+    red = gestures[1]
+    # Red has a double-press meaning: its press waits out the window after the release.
+    assert red.decided - red.at == pytest.approx(0.1 + 0.4)
+    long_green = gestures[2]
+    assert long_green.decided - long_green.at == pytest.approx(1.0)
+    assert [g.at for g in gestures] == sorted(g.at for g in gestures)
+
+
+async def test_answers_only_presses_are_immediate():
+    clock = JumpClock()
+    keyfob = SimKeyfob(clock, needs=ANSWERS_ONLY)
+    await keyfob.perform("red")
+    (press,) = await drain(keyfob, 1)
+    assert press.kind is GestureKind.PRESS and press.decided == press.at
+
+
+async def test_lost_keyfob_delivers_nothing_until_back():
+    keyfob = SimKeyfob(JumpClock(), timings=GestureTimings())
+    await keyfob.perform("lost")
+    await keyfob.perform("green")
+    await keyfob.perform("back")
+    await keyfob.perform("red")
+    events = await drain(keyfob, 3)
+    assert isinstance(events[0], KeyfobLost) and isinstance(events[1], KeyfobBack)
+    assert describe(events[2]) == "press red"
+    assert keyfob.connected
+
+
+def test_script_errors():
+    assert parse_script("0.5 green;\n1 long red") == [(0.5, "green"), (1.0, "long red")]
+    with pytest.raises(ValueError, match="SECONDS ACTION"):
+        parse_script("soon green")
+    with pytest.raises(ValueError, match="unknown keyfob action 'purple'"):
+        ScriptedKeyfob("1 purple", JumpClock())
+
+
+async def test_terminal_keys_become_gestures():
+    read_end, write_end = os.pipe()
+    stream = os.fdopen(read_end, "r")
+    keyfob = TerminalKeyfob(JumpClock(), stream=stream)
+    await keyfob.start()
+    try:
+        os.write(write_end, b"gRxb")  # x is not a key
+        events = await drain(keyfob, 3)
+        assert [describe(e) for e in events] == ["press green", "long red", "both both"]
+    finally:
+        await keyfob.close()
+        os.close(write_end)
+        stream.close()
+
+
+async def test_sim_voice_prints_lines_with_times_and_takes_their_time():
+    clock = JumpClock()
+    out = io.StringIO()
+    voice = SimVoice(out, clock, rate=120, clips={"greeting": "/clips/hello.wav"})
+    first = await voice.say("I think it is the lion.", key="guess.names")
+    second = await voice.say("Hello!", key="greeting")
+    assert first.status is SpokenStatus.FINISHED and first.via == "sim"
+    assert first.ended - first.started == pytest.approx(speaking_time("I think it is the lion.", 120))
+    assert second.started == pytest.approx(first.ended)
+    assert out.getvalue().splitlines() == [
+        "[   500.000] Kaspar: I think it is the lion.",
+        f"[{first.ended:10.3f}] Kaspar: Hello! [clip greeting]",
+    ]
+
+
+class StuckClock(JumpClock):
+    async def sleep(self, seconds: float) -> None:
+        await asyncio.sleep(3600)
+
+
+async def test_sim_voice_cancel_stops_the_line_and_drops_the_queue():
+    voice = SimVoice(io.StringIO(), StuckClock())
+    first = asyncio.create_task(voice.say("a long line"))
+    second = asyncio.create_task(voice.say("queued"))
+    await asyncio.sleep(0.05)
+    voice.cancel()
+    results = await asyncio.wait_for(asyncio.gather(first, second), WAIT)
+    assert [r.status for r in results] == [SpokenStatus.CANCELLED] * 2
+    third = asyncio.create_task(voice.say("after the pause"))
+    await asyncio.sleep(0.05)
+    voice.cancel()
+    assert (await asyncio.wait_for(third, WAIT)).status is SpokenStatus.CANCELLED
+
+
+@pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng not installed")
+async def test_sim_voice_can_also_speak_with_espeak_ng(tmp_path):
+    real = Voice(VoiceSettings(engine="espeak-ng", wav_dir=str(tmp_path)))
+    voice = SimVoice(io.StringIO(), JumpClock(), also=real)
+    try:
+        spoken = await asyncio.wait_for(voice.say("Shall we play?"), WAIT)
+    finally:
+        await voice.close()
+    assert spoken.status is SpokenStatus.FINISHED
+    assert [p.suffix for p in tmp_path.iterdir()] == [".wav"]
