@@ -89,6 +89,27 @@ class GameSettings(_Settings):
     # A target not learned after this many guesses is left to the researcher.
     max_trials_per_target: int = 30
     seed: int | None = None
+    # The arm the children move by hand in step 2, and that points at the toys.
+    pointing_group: str = "right_arm"
+    # Pilot variant: where each location is (location -> joint -> degrees).
+    poses: dict[str, dict[str, float]] = {}
+    # Small expressive poses, joint -> degrees, held briefly then undone.
+    happy_pose: dict[str, float] = {}
+    sad_pose: dict[str, float] = {}
+    # Seconds of silence after a question before each prompt: first, second,
+    # then the line that asks the researcher for help.
+    prompt_after_s: tuple[float, ...] = (8.0, 8.0, 12.0)
+    # A press this soon after an answer is recorded as an extra, not an answer.
+    extra_press_gap_s: float = 1.0
+    # Researcher gestures on the keyfob and the commands they give.
+    commands: dict[str, str] = msgspec.field(
+        default_factory=lambda: {
+            "long green": "next",
+            "long red": "pause",
+            "double red": "undo",
+            "both": "stop",
+        }
+    )
 
     @property
     def targets(self) -> tuple[str, ...]:
@@ -300,6 +321,8 @@ def _validate(config: Config, source: str) -> None:
             f"found {game.max_trials_per_target}",
         )
 
+    _check_game_controls(game, fail)
+
     seen_groups: set[str] = set()
     for index, plan in enumerate(config.sessions):
         where = f"sessions[{index}]"
@@ -325,6 +348,47 @@ def _validate(config: Config, source: str) -> None:
             fail(f"{where}.group_size", f"expected 1 to 6, found {plan.group_size}")
         if plan.answer_key:
             _check_answer_key(plan.answer_key, game, f"{where}.answer_key", fail)
+
+
+COMMANDS = ("next", "pause", "undo", "stop")
+GESTURES = ("long green", "long red", "double green", "double red", "both")
+
+
+def _check_game_controls(
+    game: GameSettings, fail: typing.Callable[[str, str], typing.NoReturn]
+) -> None:
+    for gesture, command in game.commands.items():
+        if gesture not in GESTURES:
+            fail(f"game.commands.{gesture}", f"expected a gesture, one of {', '.join(GESTURES)}")
+        if command not in COMMANDS:
+            fail(
+                f"game.commands.{gesture}",
+                f"expected one of {', '.join(COMMANDS)}, found {command!r}",
+            )
+    for command in ("next", "pause", "stop"):
+        if command not in game.commands.values():
+            fail(
+                "game.commands",
+                f"expected a gesture for {command!r}: a session cannot be run without it",
+            )
+    if game.variant == "pilot" and game.poses and set(game.poses) != set(game.locations):
+        fail(
+            "game.poses",
+            f"expected one pose per location ({', '.join(game.locations)}), "
+            f"found {', '.join(game.poses)}",
+        )
+    if game.variant == "names" and game.poses:
+        fail(
+            "game.poses",
+            "only the pilot variant has configured poses; step 2 teaches the bags' poses",
+        )
+    if not game.prompt_after_s or any(not 0.5 <= s <= 600 for s in game.prompt_after_s):
+        fail(
+            "game.prompt_after_s",
+            f"expected 1 or more delays of 0.5 to 600 s, found {list(game.prompt_after_s)}",
+        )
+    if not 0.0 <= game.extra_press_gap_s <= 10.0:
+        fail("game.extra_press_gap_s", f"expected 0 to 10 s, found {game.extra_press_gap_s}")
 
 
 def _check_names(

@@ -89,6 +89,13 @@ def test_relative_paths_are_relative_to_the_file(tmp_path: Path) -> None:
             "kaspar.toml: sessions[0].answer_key[5]: expected one of game.toys (lion, elephant, giraffe, monkey, zebra, crocodile), found 'snake'",
         ),
         ("[game\n", "kaspar.toml: (syntax): not valid TOML:"),
+        ('[game.commands]\n"long blue" = "next"', "kaspar.toml: game.commands.long blue: expected a gesture, one of long green, long red, double green, double red, both"),
+        ('[game.commands]\n"long green" = "dance"', "kaspar.toml: game.commands.long green: expected one of next, pause, undo, stop, found 'dance'"),
+        ('[game]\ncommands = { "long green" = "next", "both" = "stop" }', "kaspar.toml: game.commands: expected a gesture for 'pause': a session cannot be run without it"),
+        ('[game]\nvariant = "pilot"\nlocations = ["box", "shelf"]\n[game.poses.box]\nhead_yaw = 10.0', "kaspar.toml: game.poses: expected one pose per location (box, shelf), found box"),
+        ("[game.poses.box]\nhead_yaw = 10.0", "kaspar.toml: game.poses: only the pilot variant has configured poses"),
+        ("[game]\nprompt_after_s = []", "kaspar.toml: game.prompt_after_s: expected 1 or more delays of 0.5 to 600 s, found []"),
+        ("[game]\nextra_press_gap_s = -1.0", "kaspar.toml: game.extra_press_gap_s: expected 0 to 10 s, found -1.0"),
     ],
 )
 def test_every_error_names_file_key_expected_and_found(text: str, expected: str) -> None:

@@ -1,9 +1,8 @@
-"""`kasparctl demo`: a simulated group of children teaches Kaspar, narrated.
+"""`kasparctl demo`: the whole game on simulated hardware with simulated children.
 
-For now the demo narrates the learner and the phrase book: one group of
-simulated children (the simulator's honest teachers) plays the game's guessing
-step, and every line Kaspar would say is printed with the entropy behind it.
-The five-step game on the simulated hardware replaces this once it exists.
+Kaspar's lines, the children's presses and the robot's movements are printed
+as they happen, each with its clock time. Everything is recorded in a state
+directory, exactly as on the robot; an unfinished session there is resumed.
 """
 
 from __future__ import annotations
@@ -12,31 +11,40 @@ import argparse
 import json
 import secrets
 import sys
-from typing import Any, TextIO
+import tempfile
+from pathlib import Path
+from typing import Any
 
-import numpy as np
+import msgspec
 
-from kasparctl.config import Config, ConfigError, GameSettings, load_config
+from kasparctl.config import ConfigError, GameSettings, load_config
+from kasparctl.demo import DemoOptions, DemoStalled, demo_config, run_demo
 from kasparctl.learner import LearnerError
-from kasparctl.phrases import PhraseError, PhrasePicker, load_phrasebook
-from kasparctl.simulate import playable, simulate_group
-from kasparctl.study_stats import ProblemRecord
-from kasparctl.teacher import Teacher
-
-CHILD_WORDS = ("child one", "child two", "child three", "child four", "child five", "child six")
+from kasparctl.log import configure_logging
+from kasparctl.phrases import PhraseError
+from kasparctl.session import SessionError
+from kasparctl.teacher import Teacher, TeacherError
 
 
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "demo", help="watch a simulated group of children teach Kaspar", description=__doc__
     )
+    timing = parser.add_mutually_exclusive_group()
+    timing.add_argument("--speed", type=float, default=None, help="run the clock F times faster")
+    timing.add_argument("--fast", action="store_true", help="simulated time, as fast as possible")
     parser.add_argument("--seed", type=int, default=None, help="reproduce a game exactly")
-    parser.add_argument("--variant", choices=("names", "pilot"), default=None)
-    parser.add_argument("--profile", default=None, help="learner profile (default: paper)")
-    parser.add_argument("--config", default=None, help="kaspar.toml (default: built-in settings)")
     parser.add_argument(
-        "--silent", action="store_true", help="Kaspar does not say how sure it is"
+        "--interactive", action="store_true", help="you are the children: keys on the terminal"
     )
+    parser.add_argument(
+        "--state-dir", default=None, help="keep the records here (default: a new temporary dir)"
+    )
+    parser.add_argument("--config", default=None, help="kaspar.toml (default: the demo robot)")
+    parser.add_argument("--variant", choices=("names", "pilot"), default=None)
+    parser.add_argument("--p-wrong-green", type=float, default=0.0)
+    parser.add_argument("--p-wrong-red", type=float, default=0.0)
+    parser.add_argument("--p-no-answer", type=float, default=0.0)
     parser.add_argument(
         "--json", action="store_true", help="end with one JSON line summarising the game"
     )
@@ -44,88 +52,45 @@ def register(subparsers: Any) -> None:
 
 
 def run(arguments: argparse.Namespace) -> int:
-    try:
-        config = load_config(arguments.config) if arguments.config else Config()
-        game = config.game
-        if arguments.variant:
-            game = GameSettings(variant=arguments.variant, toys=game.toys, locations=game.locations)
-        game = playable(game)
-        params = config.profile(arguments.profile)
-        book = load_phrasebook(config.language, config.phrases_dir)
-    except KeyError:
-        print(f"error: --profile: unknown profile {arguments.profile!r}", file=sys.stderr)
+    if arguments.speed is not None and not arguments.speed > 0:
+        print(f"error: --speed: expected a number > 0, found {arguments.speed}", file=sys.stderr)
         return 1
-    except (ConfigError, PhraseError, LearnerError) as error:
+    try:
+        config = load_config(arguments.config) if arguments.config else demo_config()
+        if arguments.variant and arguments.variant != config.game.variant:
+            config = msgspec.structs.replace(config, game=_variant(config.game, arguments.variant))
+        teacher = Teacher(arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)
+    except (ConfigError, TeacherError, LearnerError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
+    # The dialogue is the demo's output; log lines go to stderr, warnings and worse only.
+    configure_logging("warning", "console", stream=sys.stderr)
     seed = arguments.seed if arguments.seed is not None else secrets.randbelow(2**31)
-    rng = np.random.default_rng(seed)
-    problems = simulate_group(game, params, Teacher(), rng)
-    speaker = Narrator(sys.stdout, PhrasePicker(book, np.random.default_rng(seed + 1)))
-    speaker.play(game, problems, speak_uncertainty=not arguments.silent)
-    trials = sum(len(problem.trials) for problem in problems)
-    learned = sum(problem.learned is not None for problem in problems)
-    print(f"\n{trials} guesses, {learned} of {len(problems)} toys learned (seed {seed}).")
+    state_dir = Path(arguments.state_dir or tempfile.mkdtemp(prefix="kaspar-demo-"))
+    options = DemoOptions(
+        state_dir=state_dir, seed=seed, teacher=teacher, interactive=arguments.interactive
+    )
+    try:
+        result = run_demo(config, options, speed=arguments.speed, fast=arguments.fast)
+    except (PhraseError, SessionError, ConfigError, DemoStalled) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    print(
+        f"\n{result.trials} guesses, {result.learned} toys learned, session {result.session} "
+        f"{result.final_state} (seed {seed}). Records: {state_dir}"
+    )
     if arguments.json:
-        summary = {
-            "session": f"demo-{seed}",
-            "finished": learned == len(problems),
-            "trials": trials,
-            "learned": learned,
-            "resumed": False,
-        }
-        print(json.dumps(summary))
+        print(json.dumps(result.summary()))
     return 0
 
 
-class Narrator:
-    """Prints what Kaspar says and does, and what the children press."""
-
-    def __init__(self, out: TextIO, picker: PhrasePicker) -> None:
-        self.out = out
-        self.picker = picker
-
-    def say(self, key: str, note: str = "", **values: str) -> None:
-        line = self.picker.line(key, **values)
-        self.out.write(f"Kaspar: {line}{f'   ({note})' if note else ''}\n")
-
-    def act(self, text: str) -> None:
-        self.out.write(f"        [{text}]\n")
-
-    def play(
-        self, game: GameSettings, problems: list[ProblemRecord], speak_uncertainty: bool
-    ) -> None:
-        pilot = game.variant == "pilot"
-        self.say("session.intro_pilot" if pilot else "session.greeting")
-        if not pilot:
-            self.say("steps.guessing")
-        n_candidates = len(game.toys)
-        turn = 0
-        for problem in problems:
-            target = game.targets[problem.target]
-            answer = game.toys[problem.answer or 0]
-            self.out.write(f"\n-- {target}: the right toy is the {answer}\n")
-            for trial in problem.trials:
-                self.say("turn.child", child=CHILD_WORDS[turn % game.children_per_group])
-                turn += 1
-                self.act(f"points at {target}")
-                if speak_uncertainty:
-                    band, line = self.picker.uncertainty(trial.entropy, n_candidates)
-                    self.out.write(f"Kaspar: {line}   ({trial.entropy:.3f} bits: {band})\n")
-                toy = game.toys[trial.choice]
-                if pilot:
-                    self.say("guess.pilot", toy=toy, location=target)
-                else:
-                    self.say("guess.names", toy=toy)
-                self.act({True: "green", False: "red", None: "nobody answers"}[trial.feedback])
-                if trial.feedback is not None:
-                    self.say("react.happy" if trial.feedback else "react.sad")
-            if problem.learned is not None:
-                toy = game.toys[problem.learned]
-                if pilot:
-                    self.say("react.learned_pilot", toy=toy, location=target)
-                else:
-                    self.say("react.learned", toy=toy)
-                    n_candidates -= 1
-        self.say("react.all_learned")
-        self.say("session.farewell")
+def _variant(game: GameSettings, variant: str) -> GameSettings:
+    if variant == "pilot":
+        locations = ("box", "shelf", "basket")
+        poses = {
+            "box": {"right_shoulder_pitch": -40.0, "right_shoulder_roll": 10.0},
+            "shelf": {"right_shoulder_pitch": -70.0, "right_shoulder_roll": 40.0},
+            "basket": {"right_shoulder_pitch": -30.0, "right_shoulder_roll": 70.0},
+        }
+        return msgspec.structs.replace(game, variant="pilot", locations=locations, poses=poses)
+    return msgspec.structs.replace(game, variant="names", locations=(), poses={})

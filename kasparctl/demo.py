@@ -1,0 +1,231 @@
+"""The whole game on simulated hardware with a simulated group of children.
+
+Used by `kasparctl demo` and by the end-to-end tests: the game, the sessions
+and the servo safety layer are the robot's own; only the servo drivers, the
+keyfob and the voice are simulated twins.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import sys
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, TextIO
+
+import msgspec
+import numpy as np
+
+from hal.clock import LoopClock
+from hal.sim_keyfob import SimKeyfob, TerminalKeyfob
+from hal.sim_servos import SimServos
+from hal.sim_voice import SimVoice
+from kasparctl import simtime
+from kasparctl.config import Config, SessionPlan, parse_config
+from kasparctl.game import Game, Hardware
+from kasparctl.game_state import GameState, restore
+from kasparctl.phrases import PhrasePicker, load_phrasebook
+from kasparctl.session import Session, find_unfinished
+from kasparctl.sim_children import SimulatedGroup
+from kasparctl.simulate import draw_answer_key
+from kasparctl.teacher import Teacher
+
+
+def demo_config() -> Config:
+    """The demo's built-in robot: Kaspar 3's head, face and pointing arm, simulated."""
+    text = resources.files("kasparctl").joinpath("demo.toml").read_text(encoding="utf-8")
+    return parse_config(text, "kasparctl/demo.toml")
+
+
+@dataclass
+class DemoOptions:
+    state_dir: Path
+    seed: int = 0
+    teacher: Teacher = field(default_factory=Teacher)
+    interactive: bool = False
+    # Printed lines: the dialogue and what the children and the robot do (the
+    # stdout of the moment the demo runs, not of the moment this was imported).
+    out: TextIO = field(default_factory=lambda: sys.stdout)
+
+
+@dataclass
+class DemoResult:
+    session: str
+    finished: bool
+    trials: int
+    learned: int
+    resumed: bool
+    final_state: str
+    state_dir: str
+
+    def summary(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class DemoRig:
+    """The simulated robot, the game on it, and the simulated group: built, not yet running."""
+
+    game: Game
+    servos: SimServos
+    keyfob: SimKeyfob
+    voice: SimVoice
+    children: SimulatedGroup | None
+    resumed: bool
+    state_dir: Path
+
+    async def run(self) -> DemoResult:
+        await self.servos.start()
+        for group in self.servos.groups:
+            # Powered on limp; torque on holds each joint where it is (no jump).
+            await self.servos.set_compliant(group, False)
+        await self.keyfob.start()
+        try:
+            final = await self.game.run()
+        finally:
+            if self.children is not None:
+                await self.children.close()
+            await self.keyfob.close()
+            await self.voice.close()
+            await self.servos.close()
+        data, session = self.game.data, self.game.session
+        assert data is not None and session is not None
+        session.close()
+        return DemoResult(
+            session=session.id,
+            finished=final == "finished",
+            trials=data.trials,
+            learned=sum(p.learned is not None for p in data.progress),
+            resumed=self.resumed,
+            final_state=final,
+            state_dir=str(self.state_dir),
+        )
+
+
+def build(
+    config: Config, options: DemoOptions, children_answers: list[int] | None = None
+) -> DemoRig:
+    """Assemble the simulated robot and (or resume) a session in options.state_dir.
+
+    `children_answers` makes the simulated children believe other answers than
+    the plan's answer key (to show the learner does not see the key).
+    """
+    clock = LoopClock()
+    out = options.out
+
+    def narrate(text: str) -> None:
+        out.write(f"[{clock.now():10.3f}]   ({text})\n")
+
+    servos = SimServos(config.servos, clock)
+    keyfob = TerminalKeyfob(clock) if options.interactive else SimKeyfob(clock)
+    voice = SimVoice(out, clock)
+    book = load_phrasebook(config.language, config.phrases_dir)
+    picker = PhrasePicker(book, np.random.default_rng([options.seed, 2]))
+    plan = config.sessions[0] if config.sessions else SessionPlan(group="demo")
+    resumed = _resume(config, options.state_dir)
+    if resumed is not None:
+        plan = resumed[1]
+    answers = _answers(config, plan, options.seed)
+
+    def open_session() -> tuple[Session, SessionPlan, GameState]:
+        planned = msgspec.structs.replace(
+            plan, answer_key=tuple(config.game.toys[a] for a in answers)
+        )
+        session = Session.create(
+            options.state_dir,
+            {
+                "group": planned.group,
+                "condition": planned.condition,
+                "variant": config.game.variant,
+                "seed": options.seed,
+                "plan": msgspec.to_builtins(planned),
+            },
+        )
+        state = GameState.new(config.game, config.profile(planned.profile), options.seed)
+        return session, planned, state
+
+    game = Game(config, Hardware(servos, keyfob, voice), picker, open_session, resumed)
+    children = None
+    if not options.interactive:
+        # A resumed game gets fresh but reproducible children: seeded by where it resumed.
+        progress = 0 if resumed is None else resumed[2].trials + 1
+        children = SimulatedGroup(
+            keyfob,
+            servos,
+            options.teacher,
+            children_answers if children_answers is not None else answers,
+            np.random.default_rng([options.seed, 1, progress]),
+            pointing_group=config.game.pointing_group,
+            narrate=narrate,
+        )
+        game.listeners.append(children)
+    game.listeners.append(_narrator(narrate))
+    return DemoRig(game, servos, keyfob, voice, children, resumed is not None, options.state_dir)
+
+
+async def play(config: Config, options: DemoOptions) -> DemoResult:
+    """Play (or resume) one session in options.state_dir on the simulated robot."""
+    return await build(config, options).run()
+
+
+def _resume(config: Config, state_dir: Path) -> tuple[Session, SessionPlan, GameState] | None:
+    directory = find_unfinished(state_dir)
+    if directory is None:
+        return None
+    session, _warnings = Session.open(directory)
+    plan = msgspec.convert(session.plan["plan"], type=SessionPlan)
+    snapshot, later = session.load_state()
+    params = config.profile(plan.profile)
+    state = restore(snapshot, later, config.game, params, session.plan.get("seed"))
+    return session, plan, state
+
+
+def _answers(config: Config, plan: SessionPlan, seed: int) -> list[int]:
+    """The right toy of each target: the plan's answer key, or one drawn for the demo."""
+    if plan.answer_key:
+        return [config.game.toys.index(toy) for toy in plan.answer_key]
+    return list(draw_answer_key(config.game, np.random.default_rng([seed, 3])))
+
+
+def _narrator(narrate: Any) -> Any:
+    def listener(event: str, info: dict[str, Any]) -> None:
+        if event == "point":
+            narrate(f"Kaspar points at {info['target']}")
+        elif event == "state" and info["state"] in ("paused", "fault", "finished", "stopped"):
+            narrate(f"the game is {info['state']}")
+        elif event == "session":
+            narrate(f"session {info['session']} starts")
+        elif event == "resumed":
+            narrate(f"session resumed in step {info['step']}")
+
+    return listener
+
+
+# In simulated time a game that waits for ever would spin for ever: past this much
+# simulated time it has stalled, and that is an error, not a long game.
+STALL_LIMIT_S = 12 * 3600.0
+
+
+class DemoStalled(Exception):
+    """A simulated game that stopped making progress."""
+
+
+def run_demo(
+    config: Config, options: DemoOptions, speed: float | None = None, fast: bool = False
+) -> DemoResult:
+    """Real time by default; `speed` times faster; or `fast`, in simulated time."""
+    if not fast:
+        return simtime.run(play(config, options), speed=speed)
+
+    async def bounded() -> DemoResult:
+        rig = build(config, options)
+        try:
+            return await asyncio.wait_for(rig.run(), STALL_LIMIT_S)
+        except TimeoutError:
+            raise DemoStalled(
+                f"no end after {STALL_LIMIT_S:.0f} simulated seconds, in state {rig.game.state}"
+            ) from None
+
+    return simtime.run(bounded(), virtual=True)

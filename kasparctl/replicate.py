@@ -1,0 +1,49 @@
+"""The study replicated with the whole game: many demo sessions in simulated time.
+
+Two implementations of one study must agree: `kasparctl simulate` runs the
+learner loop alone, this runs the game on the simulated robot and reads its
+session records back. Both are summarised by kasparctl.study_stats.
+"""
+
+from __future__ import annotations
+
+import io
+import tempfile
+from pathlib import Path
+
+from kasparctl.config import Config
+from kasparctl.demo import DemoOptions, run_demo
+from kasparctl.session import RECORDS_FILE, read_records
+from kasparctl.session_stats import problems_from_records
+from kasparctl.study_stats import ProblemRecord, StudyStats, summarise
+from kasparctl.teacher import Teacher
+
+
+def replicate(
+    config: Config, games: int, first_seed: int = 0, teacher: Teacher | None = None
+) -> StudyStats:
+    """Play `games` sessions (seeds first_seed...) and summarise every problem in them."""
+    problems: list[ProblemRecord] = []
+    with tempfile.TemporaryDirectory(prefix="kaspar-replicate-") as scratch:
+        for index in range(games):
+            state_dir = Path(scratch) / str(index)
+            options = DemoOptions(
+                state_dir=state_dir,
+                seed=first_seed + index,
+                teacher=teacher or Teacher(),
+                out=io.StringIO(),
+            )
+            run_demo(config, options, fast=True)
+            (session_dir,) = (state_dir / "sessions").iterdir()
+            records = read_records(session_dir / RECORDS_FILE).records
+            plan = records[0]["plan"]["plan"]
+            problems.extend(
+                problems_from_records(
+                    records,
+                    config.game.toys,
+                    plan["answer_key"],
+                    config.profile(plan["profile"]),
+                    index,
+                )
+            )
+    return summarise(problems)
