@@ -145,6 +145,14 @@ class Keyfob:
         self._timer = self._watch = None
         self._drop_device()
 
+    def probe(self) -> str:
+        """Open the configured keyfob once and close it: "path (name)"; KeyfobError or OSError."""
+        device = self._open_device()
+        try:
+            return f"{device.path} ({device.name})"
+        finally:
+            device.close()
+
     # -- opening ------------------------------------------------------------
 
     def _open_device(self) -> EvdevDevice:

@@ -18,9 +18,13 @@ import sys
 from collections.abc import Iterable
 from typing import TextIO
 
+import structlog
+
 from hal.clock import Clock
 from hal.gestures import GREEN, RED, Gesture, GestureNeeds, GestureRecognizer, GestureTimings
 from hal.input_api import InputEvent, KeyfobBack, KeyfobLost
+
+log = structlog.get_logger("hal.sim_keyfob")
 
 PRESS_HOLD = 0.1  # a child's short press
 PRESS_GAP = 0.1  # between the two presses of a double
@@ -220,8 +224,14 @@ class TerminalKeyfob(SimKeyfob):
 
             self._saved_mode = termios.tcgetattr(fd)
             tty.setcbreak(fd)  # one key at a time, no Enter; Ctrl-C still works
+        try:
+            asyncio.get_running_loop().add_reader(fd, self._on_key)
+        except PermissionError:
+            # A regular file or /dev/null (a service's stdin) cannot be watched:
+            # nobody is there to press keys, which is not a fault.
+            log.warning("no terminal keyfob: standard input cannot be read for keys")
+            return
         print(TERMINAL_HELP, file=sys.stderr)
-        asyncio.get_running_loop().add_reader(fd, self._on_key)
         self._task = asyncio.get_running_loop().create_task(self._perform_keys())
 
     def _on_key(self) -> None:

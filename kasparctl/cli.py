@@ -14,7 +14,15 @@ from collections.abc import Sequence
 
 from kasparctl import __version__
 
-COMMAND_MODULES = ("check", "simulate", "demo", "servos", "say")
+COMMAND_MODULES = (
+    "check",
+    "simulate",
+    "demo",
+    "run",
+    "install",
+    "servos",
+    "say",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

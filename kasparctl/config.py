@@ -145,6 +145,12 @@ class SessionPlan(_Settings):
         return f"{self.profile}/{'spoken' if self.speak_uncertainty else 'silent'}"
 
 
+class DaemonSettings(_Settings):
+    # After SIGTERM Kaspar goes to rest at each joint's speed limit, then either
+    # holds there ("hold": no slump while the computer shuts down) or goes limp.
+    stop_action: Literal["hold", "torque_off"] = "hold"
+
+
 class Config(_Settings):
     state_dir: str = "/var/lib/kaspar"
     # A directory of phrase files that overrides the shipped ones.
@@ -157,6 +163,7 @@ class Config(_Settings):
     servos: ServoSettings = ServoSettings()
     keyfob: KeyfobSettings = KeyfobSettings()
     voice: VoiceSettings = VoiceSettings()
+    daemon: DaemonSettings = DaemonSettings()
 
     def profile(self, name: str | None = None) -> LearnerParams:
         return self.learner.all_profiles()[name or self.learner.default_profile].params()

@@ -109,6 +109,11 @@ class VoiceFailed(Exception):
     """Kaspar could not say a line: the session cannot go on unheard."""
 
 
+class SpeechCut(Exception):
+    """A line was cut short by voice.cancel(); not a task cancellation, which must
+    never be swallowed (the daemon's stop cancels the game's own task)."""
+
+
 GameEvent = Gesture | KeyfobLost | KeyfobBack | StepEnded | HardwareFault
 Listener = Callable[[str, dict[str, Any]], None]
 
@@ -482,9 +487,9 @@ class Game:
         else:
             await self._announce("fault.problem")
 
-    async def stop_safely(self) -> None:
-        """The daemon's SIGTERM: the same as the researcher's stop gesture."""
-        await self._on_command(Command.STOP, "signal", self._now())
+    def note_shutdown(self, reason: str) -> None:
+        """The daemon is stopping: the session stays unfinished, to be resumed at the next start."""
+        self._record("session", event="shutdown", reason=reason, state=self.state)
 
     # -- the steps --------------------------------------------------------------
 
@@ -705,7 +710,7 @@ class Game:
 
     async def _announce(self, key: str, **values: str) -> None:
         """Speech from the run loop: a failing voice is recorded, never raised here."""
-        with contextlib.suppress(VoiceFailed, asyncio.CancelledError):
+        with contextlib.suppress(VoiceFailed, SpeechCut):
             await self._say(key, **values)
 
     async def _say(self, key: str, **values: str) -> str:
@@ -714,7 +719,7 @@ class Game:
     async def _say_text(self, text: str, key: str) -> str:
         spoken: Spoken = await self.hw.voice.say(text, key)
         if spoken.status is SpokenStatus.CANCELLED:
-            raise asyncio.CancelledError
+            raise SpeechCut(text)
         if spoken.status is not SpokenStatus.FINISHED:
             self._record(
                 "hal", event="voice", status=spoken.status.value, text=text, error=spoken.error

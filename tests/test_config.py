@@ -120,8 +120,12 @@ def test_missing_file_is_named(tmp_path: Path) -> None:
 
 
 def test_check_command_exit_codes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["check", "--config", str(EXAMPLE)]) == 0
-    assert "ok:" in capsys.readouterr().out
+    simulated = tmp_path / "sim.toml"
+    simulated.write_text(EXAMPLE.read_text() + "\n[keyfob]\nbackend = 'sim'\n[voice]\nbackend = 'sim'\n")
+    assert main(["check", "--config", str(simulated)]) == 0
+    table = capsys.readouterr().out
+    assert f"configuration  ok    {simulated} (2 planned sessions)" in table
+    assert "keyfob         ok    simulated" in table
     bad = tmp_path / "bad.toml"
     bad.write_text("[game]\nvariant = 'maze'\n")
     assert main(["check", "--config", str(bad)]) == 1

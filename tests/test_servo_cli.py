@@ -54,6 +54,12 @@ def test_scan_rejects_nonsense_ids(capsys):
 def real_config(tmp_path, port) -> str:
     path = tmp_path / "kaspar.toml"
     path.write_text(f"""
+[keyfob]
+backend = "sim"
+
+[voice]
+backend = "sim"
+
 [servos]
 backend = "real"
 
@@ -108,8 +114,9 @@ def test_check_names_each_missing_servo(tmp_path, capsys, monkeypatch):
         code = main(["check", "--config", real_config(tmp_path, emulator.path)])
     captured = capsys.readouterr()
     assert code == 1
-    assert "servo torso_yaw is missing (bus body on" in captured.err and "id 2" in captured.err
-    assert "left_elbow" not in captured.err
+    assert "servos         FAIL  servo torso_yaw is missing (bus body on" in captured.out
+    assert "id 2" in captured.out
+    assert "left_elbow" not in captured.out
 
 
 def test_check_passes_when_every_servo_answers(tmp_path, capsys):
@@ -120,6 +127,6 @@ def test_check_passes_when_every_servo_answers(tmp_path, capsys):
 
 def test_check_does_not_touch_servos_with_the_sim_backend(tmp_path, capsys):
     path = tmp_path / "kaspar.toml"
-    path.write_text("[servos]\nbackend = 'sim'\n")
+    path.write_text("[servos]\nbackend = 'sim'\n[keyfob]\nbackend = 'sim'\n[voice]\nbackend = 'sim'\n")
     assert main(["check", "--config", str(path)]) == 0
     assert "servos answered" not in capsys.readouterr().out

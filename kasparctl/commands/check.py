@@ -1,4 +1,9 @@
-"""`kasparctl check`: validate the configuration (and, later, the hardware)."""
+"""`kasparctl check`: is this robot ready for a session? A table, and an exit code.
+
+Validates the configuration and phrases, pings every configured servo (nothing
+is written, so a powered robot does not move), finds the keyfob, and speaks a
+test line. Usable over ssh by an engineer; exit 1 when anything is wrong.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +11,8 @@ import argparse
 import asyncio
 import os
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from hal.clock import MonotonicClock
@@ -15,17 +22,29 @@ from kasparctl.config import DEFAULT_CONFIG_PATH, Config, ConfigError, load_conf
 from kasparctl.log import configure_logging
 from kasparctl.phrases import PhraseError, load_phrasebook
 
+TEST_LINE = "Hello, I am Kaspar. My voice is working."
+
 
 def default_config_path() -> str:
     return os.environ.get("KASPAR_CONFIG", str(DEFAULT_CONFIG_PATH))
 
 
+@dataclass(frozen=True, slots=True)
+class Result:
+    part: str
+    ok: bool
+    detail: str
+
+
 def register(subparsers: Any) -> None:
-    parser = subparsers.add_parser("check", help="validate the configuration and phrases")
+    parser = subparsers.add_parser("check", help="check the configuration and the hardware")
     parser.add_argument(
         "--config",
         default=None,
         help="kaspar.toml (default: $KASPAR_CONFIG or /etc/kaspar/kaspar.toml)",
+    )
+    parser.add_argument(
+        "--quiet", action="store_true", help="do not speak the test line (check the voice silently)"
     )
     parser.set_defaults(run=run)
 
@@ -38,22 +57,31 @@ def run(arguments: argparse.Namespace) -> int:
     except (ConfigError, PhraseError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
-    print(f"ok: {path} ({len(config.sessions)} planned sessions, phrases from {phrasebook.source})")
-    if config.servos.backend == "real":
-        return check_servos(config)
-    return 0
-
-
-def check_servos(config: Config) -> int:
-    """Ping every configured joint's servo; name each one that does not answer."""
     configure_logging("warning", "console", stream=sys.stderr)
-    problems = asyncio.run(_missing_servos(config.servos))
-    for problem in problems:
-        print(f"error: {problem}", file=sys.stderr)
+    results = [
+        Result("configuration", True, f"{path} ({len(config.sessions)} planned sessions)"),
+        Result("phrases", True, phrasebook.source),
+        *asyncio.run(_hardware(config, speak=not arguments.quiet)),
+    ]
+    _print_table(results)
+    return 0 if all(result.ok for result in results) else 1
+
+
+async def _hardware(config: Config, speak: bool) -> list[Result]:
+    checks: list[Callable[[Config, bool], Any]] = [_servos, _keyfob, _voice]
+    return [result for check in checks for result in await check(config, speak)]
+
+
+async def _servos(config: Config, speak: bool) -> list[Result]:
+    del speak
+    if config.servos.backend != "real":
+        return [Result("servos", True, "simulated (servos.backend = 'sim')")]
+    if not config.servos.joints:
+        return [Result("servos", False, "no joints configured in [servos]")]
+    problems = await _missing_servos(config.servos)
     if problems:
-        return 1
-    print(f"ok: all {len(config.servos.joints)} servos answered")
-    return 0
+        return [Result("servos", False, problem) for problem in problems]
+    return [Result("servos", True, f"all {len(config.servos.joints)} servos answered")]
 
 
 async def _missing_servos(settings: ServoSettings) -> list[str]:
@@ -77,3 +105,39 @@ async def _missing_servos(settings: ServoSettings) -> list[str]:
                 f"servo {joint.name} is not a {joint.model} (model number {model_number}, {where})"
             )
     return problems
+
+
+async def _keyfob(config: Config, speak: bool) -> list[Result]:
+    del speak
+    if config.keyfob.backend != "real":
+        return [Result("keyfob", True, "simulated (keyfob.backend = 'sim')")]
+    from hal.errors import HalError
+    from hal.keyfob import Keyfob
+
+    try:
+        found = Keyfob(config.keyfob, MonotonicClock()).probe()
+    except (HalError, OSError) as error:
+        return [Result("keyfob", False, f"not found: {error}")]
+    return [Result("keyfob", True, found)]
+
+
+async def _voice(config: Config, speak: bool) -> list[Result]:
+    if config.voice.backend != "real":
+        return [Result("voice", True, "simulated (voice.backend = 'sim')")]
+    from hal.voice import Voice
+
+    voice = Voice(config.voice, MonotonicClock())
+    try:
+        spoken = await voice.say(TEST_LINE if speak else "")
+    finally:
+        await voice.close()
+    if not spoken.finished:
+        return [Result("voice", False, f"{spoken.status.value}: {spoken.error or 'no detail'}")]
+    return [Result("voice", True, f"spoke the test line via {spoken.via}")]
+
+
+def _print_table(results: list[Result]) -> None:
+    width = max(len(result.part) for result in results)
+    for result in results:
+        verdict = "ok" if result.ok else "FAIL"
+        print(f"{result.part:<{width}}  {verdict:<4}  {result.detail}")

@@ -1,0 +1,39 @@
+"""`kasparctl run`: the service itself (systemd starts it at boot)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from kasparctl.commands.check import default_config_path
+from kasparctl.config import ConfigError
+from kasparctl.daemon import DaemonOptions, run_daemon
+from kasparctl.phrases import PhraseError
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser("run", help="run the controller (what systemd starts)")
+    parser.add_argument(
+        "--config",
+        default=None,
+        help="kaspar.toml (default: $KASPAR_CONFIG or /etc/kaspar/kaspar.toml)",
+    )
+    parser.add_argument(
+        "--sim", action="store_true", help="simulated hardware throughout (keys on standard input)"
+    )
+    parser.add_argument("--state-dir", default=None, help="overrides the configured state_dir")
+    parser.set_defaults(run=run)
+
+
+def run(arguments: argparse.Namespace) -> int:
+    options = DaemonOptions(
+        config_path=arguments.config or default_config_path(),
+        sim=arguments.sim,
+        state_dir=arguments.state_dir,
+    )
+    try:
+        return run_daemon(options)
+    except (ConfigError, PhraseError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1

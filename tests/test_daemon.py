@@ -1,0 +1,185 @@
+"""`kasparctl run --sim` as systemd runs it: notify protocol, watchdog, signals, saved session."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from kasparctl.sdnotify import Notifier, watchdog_interval
+from kasparctl.session import RECORDS_FILE, STATE_FILE
+
+REPO = Path(__file__).resolve().parents[1]
+DEMO_CONFIG = REPO / "kasparctl" / "demo.toml"
+WATCHDOG_USEC = 600_000  # pings expected every 0.3 s
+
+
+class NotifyListener:
+    def __init__(self, path: Path) -> None:
+        self.socket = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.socket.bind(str(path))
+        self.messages: list[tuple[float, str]] = []
+
+    def collect(self, seconds: float) -> list[tuple[float, str]]:
+        end = time.monotonic() + seconds
+        got = []
+        while (left := end - time.monotonic()) > 0:
+            self.socket.settimeout(left)
+            try:
+                data = self.socket.recv(4096)
+            except TimeoutError:
+                break
+            got.append((time.monotonic(), data.decode()))
+        self.messages += got
+        return got
+
+    def wait_for(self, field: str, seconds: float = 30.0) -> float:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            for at, message in self.collect(min(0.5, end - time.monotonic())):
+                if field in message.split("\n"):
+                    return at
+        raise AssertionError(f"{field} never arrived; got {[m for _, m in self.messages][-10:]}")
+
+
+@pytest.fixture
+def daemon(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], NotifyListener, Path]]:
+    listener = NotifyListener(tmp_path / "notify.sock")
+    state_dir = tmp_path / "state"
+    env = os.environ | {
+        "NOTIFY_SOCKET": str(tmp_path / "notify.sock"),
+        "WATCHDOG_USEC": str(WATCHDOG_USEC),
+        "KASPAR_DEBUG_LOOP_BLOCK_S": "2.0",
+    }
+    env.pop("WATCHDOG_PID", None)
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "kasparctl",
+            "run",
+            "--sim",
+            "--config",
+            str(DEMO_CONFIG),
+            "--state-dir",
+            str(state_dir),
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        yield process, listener, state_dir
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.communicate(timeout=30)
+        listener.socket.close()
+
+
+def test_ready_status_watchdog_and_a_clean_stop(daemon) -> None:
+    process, listener, state_dir = daemon
+    started = time.monotonic()
+    listener.wait_for("READY=1")
+    assert time.monotonic() - started < 30
+
+    # The researcher's long green starts a session; STATUS follows the game.
+    assert process.stdin is not None
+    process.stdin.write("G")
+    process.stdin.flush()
+    listener.wait_for("STATUS=step 1: placing the bags")
+
+    pings = [at for at, message in listener.collect(2.0) if message == "WATCHDOG=1"]
+    assert 4 <= len(pings) <= 10, pings  # every 0.3 s, give or take a busy machine
+
+    # A blocked loop sends nothing: that is what lets systemd restart a hung service.
+    os.kill(process.pid, signal.SIGUSR2)
+    blocked = listener.collect(1.5)
+    assert not [m for _, m in blocked if m == "WATCHDOG=1"], blocked
+    listener.wait_for("WATCHDOG=1", seconds=5)
+
+    process.send_signal(signal.SIGTERM)
+    listener.wait_for("STOPPING=1")
+    assert process.wait(timeout=25) == 0
+
+    # The session is saved, unfinished, to be resumed at the next start.
+    (session_dir,) = (state_dir / "sessions").iterdir()
+    snapshot = json.loads((session_dir / STATE_FILE).read_text())
+    assert snapshot["finished"] is False
+    records = [json.loads(line) for line in (session_dir / RECORDS_FILE).read_text().splitlines()]
+    assert records[-1]["kind"] == "session" and records[-1]["event"] == "shutdown"
+    assert records[-1]["reason"] == "SIGTERM"
+    stdout = process.stdout.read() if process.stdout else ""
+    for line in filter(None, stdout.splitlines()):
+        json.loads(line)  # journald gets one JSON object a line, nothing else on stdout
+
+
+def test_a_restart_resumes_the_session(tmp_path: Path) -> None:
+    state_dir = tmp_path / "state"
+    command = [
+        sys.executable,
+        "-m",
+        "kasparctl",
+        "run",
+        "--sim",
+        "--config",
+        str(DEMO_CONFIG),
+        "--state-dir",
+        str(state_dir),
+    ]
+    first = subprocess.Popen(
+        command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    assert first.stdin is not None
+    time.sleep(3)
+    first.stdin.write("G")
+    first.stdin.flush()
+    time.sleep(3)
+    first.send_signal(signal.SIGINT)
+    assert first.wait(timeout=25) == 0
+    second = subprocess.Popen(
+        command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    time.sleep(4)
+    second.send_signal(signal.SIGTERM)
+    _, err = second.communicate(timeout=25)
+    assert second.returncode == 0, err
+    (session_dir,) = (state_dir / "sessions").iterdir()
+    records = [json.loads(line) for line in (session_dir / RECORDS_FILE).read_text().splitlines()]
+    events = [r.get("event") for r in records if r["kind"] == "session"]
+    assert events == ["start", "shutdown", "resumed", "shutdown"]
+    assert any(w in err for w in ("nap", "awake", "sleep"))  # Kaspar says it resumed
+
+
+def test_notifier_speaks_the_protocol_to_abstract_and_path_sockets(tmp_path: Path) -> None:
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    name = f"kaspar-test-{os.getpid()}"
+    listener.bind("\0" + name)
+    listener.settimeout(5)
+    notifier = Notifier("@" + name)
+    assert notifier.ready("waiting")
+    assert listener.recv(100) == b"READY=1\nSTATUS=waiting"
+    notifier.close()
+    listener.close()
+    assert not Notifier("").enabled
+    assert not Notifier(str(tmp_path / "nobody-listens")).notify("WATCHDOG=1")
+
+
+def test_watchdog_interval_is_half_of_watchdog_usec(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("WATCHDOG_USEC", "10000000")
+    monkeypatch.delenv("WATCHDOG_PID", raising=False)
+    assert watchdog_interval() == 5.0
+    monkeypatch.setenv("WATCHDOG_PID", "1")  # meant for another process
+    assert watchdog_interval() is None
+    monkeypatch.delenv("WATCHDOG_USEC")
+    assert watchdog_interval() is None

@@ -1,0 +1,86 @@
+"""The service unit as systemd itself reads it: clean, and exposed as little as possible."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+UNIT = REPO / "systemd" / "kasparctl.service"
+EXPOSURE_LIMIT = 2.0
+
+
+def unit_for_this_machine(tmp_path: Path) -> Path:
+    """The unit with ExecStart= pointing at this checkout's kasparctl (verify checks it exists)."""
+    kasparctl = Path(sys.executable).with_name("kasparctl")
+    assert kasparctl.exists(), kasparctl
+    copy = tmp_path / "kasparctl.service"
+    copy.write_text(UNIT.read_text().replace("/opt/kasparctl/bin/kasparctl", str(kasparctl)))
+    return copy
+
+
+def systemd_analyze() -> str:
+    found = shutil.which("systemd-analyze")
+    assert found, "systemd-analyze is needed (Debian package systemd; .ci/run installs it)"
+    return found
+
+
+def test_systemd_analyze_verify_says_nothing(tmp_path: Path) -> None:
+    # verify exits 0 even on unknown keys, so its stderr is the verdict.
+    result = subprocess.run(
+        [systemd_analyze(), "verify", str(unit_for_this_machine(tmp_path))],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.stderr == "" and result.returncode == 0, result.stderr
+
+
+def test_security_exposure_is_at_most_two(tmp_path: Path) -> None:
+    result = subprocess.run(
+        [
+            systemd_analyze(),
+            "security",
+            "--offline=true",
+            "--no-pager",
+            str(unit_for_this_machine(tmp_path)),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    found = re.search(r"Overall exposure level for \S+: (\d+\.\d+)", result.stdout)
+    assert found, result.stdout + result.stderr
+    assert float(found.group(1)) <= EXPOSURE_LIMIT, result.stdout
+
+
+def test_unit_keeps_what_the_robot_needs() -> None:
+    text = UNIT.read_text()
+    for line in (
+        "Type=notify",
+        "WatchdogSec=",
+        "Restart=on-failure",
+        "StateDirectoryMode=0700",
+        "SupplementaryGroups=dialout input audio",
+        "DevicePolicy=closed",
+        "CapabilityBoundingSet=\n",
+        "NoNewPrivileges=yes",
+        "ProtectSystem=strict",
+        "PrivateNetwork=yes",
+        "SystemCallFilter=@system-service",
+        "StartLimitBurst=",
+    ):
+        assert line in text, line
+
+
+def test_install_print_names_every_file_it_installs(capsys) -> None:
+    from kasparctl.cli import main
+
+    assert main(["install", "--print"]) == 0
+    printed = capsys.readouterr().out
+    for path in re.findall(r"(?<![/\w])systemd/[\w.-]+", printed):
+        assert (REPO / path).is_file(), path
+    assert "systemctl enable --now kasparctl.service" in printed
