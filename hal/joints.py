@@ -126,6 +126,10 @@ class Joints:
         """Call `listener` with every newly latched fault (the robot says so aloud)."""
         self._fault_listeners.append(listener)
 
+    def off_fault(self, listener: Callable[[Fault], None]) -> None:
+        with contextlib.suppress(ValueError):
+            self._fault_listeners.remove(listener)
+
     async def start(self, poll: bool = True, read: bool = True) -> None:
         """Open the buses; with `read`, learn where every joint is; with `poll`, watch health.
 

@@ -8,7 +8,7 @@ ones (hal.sim_servos.SimServos) implement ServoApi, with the same safety rules.
 from __future__ import annotations
 
 import enum
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
@@ -116,6 +116,14 @@ class ServoApi(Protocol):
         the safe way, as by set_compliant(group, False); one found outside its range
         stays limp (logged). Joints made compliant on purpose stay limp.
         """
+        ...
+
+    def on_fault(self, listener: Callable[[Fault], None]) -> None:
+        """Call `listener` with every newly latched fault, as it is latched."""
+        ...
+
+    def off_fault(self, listener: Callable[[Fault], None]) -> None:
+        """Stop calling a listener given to on_fault (unknown listeners are ignored)."""
         ...
 
     async def clear_faults(self) -> None:

@@ -45,7 +45,6 @@ log = structlog.get_logger(__name__)
 CHILD_WORDS = ("child one", "child two", "child three", "child four", "child five", "child six")
 PAUSABLE = ("placing", "teaching", "revealing", "guessing")
 STATES = ("idle", *STEPS, "finished", "paused", "fault", "stopped")
-FAULT_POLL_S = 0.5
 
 
 def _transitions() -> list[dict[str, Any]]:
@@ -192,10 +191,12 @@ class Game:
 
     async def run(self) -> str:
         """Play until the session is finished or stopped; returns the final state."""
-        readers = [
-            asyncio.create_task(self._read_keyfob(), name="keyfob reader"),
-            asyncio.create_task(self._watch_servos(), name="servo watch"),
-        ]
+        readers = [asyncio.create_task(self._read_keyfob(), name="keyfob reader")]
+        # The HAL latches faults and takes the safe action itself; the game only has
+        # to stop the step and say so, once per fault, including any latched already.
+        self.hw.servos.on_fault(self._fault_latched)
+        for fault in self.hw.servos.faults:
+            self._fault_latched(fault)
         self.hw.keyfob.set_needs(self._gesture_needs())
         try:
             if self.resumed:
@@ -214,6 +215,7 @@ class Game:
                 await self._handle(await self._events.get())
         finally:
             await self._cancel_step()
+            self.hw.servos.off_fault(self._fault_latched)
             for task in readers:
                 task.cancel()
             await asyncio.gather(*readers, return_exceptions=True)
@@ -256,17 +258,11 @@ class Game:
         while True:
             await self._events.put(await self.hw.keyfob.next_event())
 
-    async def _watch_servos(self) -> None:
-        # The HAL latches faults and takes the safe action itself; the game only
-        # has to notice, stop the step and say so, once per fault.
-        while True:
-            for fault in self.hw.servos.faults:
-                if fault not in self._seen_faults:
-                    self._seen_faults.add(fault)
-                    await self._events.put(
-                        HardwareFault("servo", f"{fault.kind.value}: {fault.detail}", fault.joint)
-                    )
-            await asyncio.sleep(FAULT_POLL_S)
+    def _fault_latched(self, fault: Fault) -> None:
+        if fault not in self._seen_faults:
+            self._seen_faults.add(fault)
+            detail = f"{fault.kind.value}: {fault.detail}"
+            self._events.put_nowait(HardwareFault("servo", detail, fault.joint))
 
     # -- gestures ---------------------------------------------------------------
 

@@ -12,8 +12,6 @@ HAL events) is history only.
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -117,7 +115,7 @@ class GameState:
         self.undo = {
             "trial": int(record["trial"]),
             "q_row": self.learner.table[target].tolist(),
-            "progress": dataclasses.asdict(self.progress[target]),
+            "progress": _progress_plain(self.progress[target]),
             "offered": list(self.offered),
             "turn": self.turn,
             "target": self.target,
@@ -157,16 +155,17 @@ class GameState:
         return {
             "step": self.step,
             "learner": self.learner.to_plain(),
-            "progress": [dataclasses.asdict(p) for p in self.progress],
+            "progress": [_progress_plain(p) for p in self.progress],
             "offered": list(self.offered),
             "trials": self.trials,
             "turn": self.turn,
             "target": self.target,
             "previous": None if self.previous is None else list(self.previous),
-            "poses": copy.deepcopy(self.poses),
+            "poses": {target: dict(pose) for target, pose in self.poses.items()},
             "teach_round": self.teach_round,
             "teach_bag": self.teach_bag,
-            "undo": copy.deepcopy(self.undo),
+            # Built by _apply_trial from fresh lists and never changed in place.
+            "undo": None if self.undo is None else dict(self.undo),
             "paused": self.paused,
         }
 
@@ -191,6 +190,18 @@ class GameState:
             )
         except (KeyError, TypeError, ValueError) as error:
             raise StateError(f"unusable game state snapshot: {error!r}") from error
+
+
+def _progress_plain(progress: TargetProgress) -> dict[str, Any]:
+    # dataclasses.asdict deep-copies field by field: too slow for a snapshot per record.
+    return {
+        "correct_answers_to_learn": progress.correct_answers_to_learn,
+        "max_trials": progress.max_trials,
+        "trials": progress.trials,
+        "streak": progress.streak,
+        "streak_label": progress.streak_label,
+        "learned": progress.learned,
+    }
 
 
 def restore(
