@@ -22,6 +22,9 @@ COMMAND_MODULES = (
     "install",
     "servos",
     "say",
+    "sessions",
+    "export",
+    "report",
 )
 
 

@@ -661,12 +661,13 @@ class Game:
 
     async def _react(self, green: bool) -> None:
         expression = self.game.happy_pose if green else self.game.sad_pose
-        moving = None
-        if expression:
-            moving = asyncio.create_task(self._express(dict(expression)))
-        await self._say("react.happy" if green else "react.sad")
-        if moving is not None:
-            await moving
+        line = self._say("react.happy" if green else "react.sad")
+        if not expression:
+            await line
+            return
+        # Face and words together; gather cancels both with the step and
+        # retrieves a servo error from either, so none is left unheard.
+        await asyncio.gather(line, self._express(dict(expression)))
 
     async def _express(self, pose: dict[str, float]) -> None:
         before = await self.hw.servos.read_positions()

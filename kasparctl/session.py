@@ -114,9 +114,9 @@ def read_records(path: Path, repair: bool = False) -> RecordsRead:
         records.append(record)
         good_end = position
     if tail:
+        where = f"moved to {path.name}{TORN_SUFFIX}" if repair else "left in place, not read"
         warnings.append(
-            f"{path}: the last line was torn ({len(tail)} bytes, a crash during a write); "
-            f"moved to {path.name}{TORN_SUFFIX}"
+            f"{path}: the last line was torn ({len(tail)} bytes, a crash during a write); {where}"
         )
         if repair:
             _move_torn_tail(path, tail, good_end)

@@ -1,0 +1,174 @@
+"""Sessions read back from disk: plan, records, and what they add up to.
+
+The records are the truth (see kasparctl.session): a session's status and
+trial count come from them, not from the state snapshot, which a crash can
+leave one record behind.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import msgspec
+
+from kasparctl.session import PLAN_FILE, RECORDS_FILE, read_records, session_dirs
+from kasparctl.session_stats import undone_trials
+
+
+class CatalogueError(Exception):
+    """A session that cannot be found or read, with its path."""
+
+
+@dataclass(frozen=True)
+class SessionData:
+    directory: Path
+    # plan.json as the robot wrote it: session, created, group, condition, variant, seed, plan.
+    meta: dict[str, Any]
+    records: list[dict[str, Any]]
+    # Lines of records.jsonl that were not whole records, one message each.
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def id(self) -> str:
+        return str(self.meta.get("session", self.directory.name))
+
+    @property
+    def plan(self) -> dict[str, Any]:
+        return dict(self.meta.get("plan") or {})
+
+    @property
+    def group(self) -> str:
+        return str(self.meta.get("group", self.plan.get("group", "")))
+
+    @property
+    def profile(self) -> str:
+        return str(self.plan.get("profile", "paper"))
+
+    @property
+    def speak_uncertainty(self) -> bool:
+        return bool(self.plan.get("speak_uncertainty", True))
+
+    @property
+    def condition(self) -> str:
+        spoken = "spoken" if self.speak_uncertainty else "silent"
+        return str(self.meta.get("condition") or f"{self.profile}/{spoken}")
+
+    @property
+    def variant(self) -> str:
+        return str(self.meta.get("variant", ""))
+
+    @property
+    def created(self) -> str:
+        return str(self.meta.get("created", ""))
+
+    @property
+    def date(self) -> str:
+        return self.created[:10]
+
+    @property
+    def children(self) -> tuple[str, ...]:
+        return tuple(self.plan.get("children") or ())
+
+    @property
+    def answer_key(self) -> tuple[str, ...]:
+        return tuple(self.plan.get("answer_key") or ())
+
+    @cached_property
+    def undone(self) -> frozenset[int]:
+        return frozenset(undone_trials(self.records))
+
+    @cached_property
+    def all_trials(self) -> list[dict[str, Any]]:
+        """Every trial record, undone ones included, in the order they were recorded."""
+        return [r for r in self.records if r.get("kind") == "trial"]
+
+    @cached_property
+    def trials(self) -> list[dict[str, Any]]:
+        """The trials that count: an answer taken back with undo is not one."""
+        return [r for r in self.all_trials if int(r["trial"]) not in self.undone]
+
+    @property
+    def status(self) -> str:
+        """ "finished", "stopped" (the researcher's stop) or "interrupted" (never ended)."""
+        last_step = None
+        for record in self.records:
+            if record.get("kind") == "step":
+                last_step = record.get("to")
+        return last_step if last_step in ("finished", "stopped") else "interrupted"
+
+    @property
+    def resumed(self) -> int:
+        """How many times the robot carried this session on after a crash or restart."""
+        return sum(
+            1 for r in self.records if r.get("kind") == "session" and r.get("event") == "resumed"
+        )
+
+    @cached_property
+    def toys(self) -> tuple[str, ...]:
+        """The game's toys in the order of the per-toy lists (probabilities, Q rows).
+
+        plan.json does not hold them; a guess over every toy lists them all as
+        candidates, in that order, and the first guess of a problem is such a
+        guess in both variants. Failing that, positions are named from the choices.
+        """
+        width = 0
+        for trial in self.all_trials:
+            candidates = list(trial.get("candidates") or ())
+            width = max(width, len(trial.get("probabilities") or ()))
+            if candidates and len(candidates) == len(trial.get("probabilities") or ()):
+                return tuple(str(toy) for toy in candidates)
+        names = [f"toy {index + 1}" for index in range(width)]
+        for trial in self.all_trials:
+            index = trial.get("choice_index")
+            if isinstance(index, int) and 0 <= index < width:
+                names[index] = str(trial.get("choice"))
+        return tuple(names)
+
+    def first_names(self) -> dict[str, str]:
+        """Each first name in the plan and the pseudonym that replaces it ("child 2")."""
+        return {name: f"child {index + 1}" for index, name in enumerate(self.children) if name}
+
+
+def load_session(directory: Path) -> SessionData:
+    try:
+        meta = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
+    except (OSError, msgspec.DecodeError) as error:
+        raise CatalogueError(f"{directory / PLAN_FILE}: cannot read the plan: {error}") from error
+    if not isinstance(meta, dict):
+        raise CatalogueError(f"{directory / PLAN_FILE}: expected a JSON object")
+    read = read_records(directory / RECORDS_FILE)
+    return SessionData(directory, meta, read.records, list(read.warnings))
+
+
+def find_sessions(state_dir: Path | None, names: Sequence[str]) -> list[Path]:
+    """Session directories: every one in `state_dir`, or the named ones.
+
+    A name is a session id (a directory name under <state_dir>/sessions) or the
+    path of a session directory, so sessions copied off the robot need no state dir.
+    """
+    if not names:
+        if state_dir is None:
+            raise CatalogueError("no state directory to list sessions from")
+        return list(session_dirs(state_dir))
+    found = []
+    for name in names:
+        path = Path(name)
+        if (path / PLAN_FILE).is_file():
+            found.append(path)
+        elif state_dir is not None and (state_dir / "sessions" / name / PLAN_FILE).is_file():
+            found.append(state_dir / "sessions" / name)
+        else:
+            where = f" in {state_dir / 'sessions'}" if state_dir is not None else ""
+            raise CatalogueError(
+                f"no session {name!r}{where} (`kasparctl sessions` lists them; "
+                "a session directory's path works too)"
+            )
+    return found
+
+
+def load_sessions(directories: Iterable[Path]) -> list[SessionData]:
+    return [load_session(directory) for directory in directories]

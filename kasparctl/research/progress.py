@@ -1,0 +1,30 @@
+"""Progress bars on a terminal for long exports and reports; silent otherwise.
+
+tqdm is optional (the `progress` extra): without it, or when stderr is not a
+terminal (a pipe, a log, a test), the items pass through untouched.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterable, Iterator, Sized
+from typing import TextIO, TypeVar
+
+T = TypeVar("T")
+
+# Below this many items a bar only flickers.
+MINIMUM_ITEMS = 20
+
+
+def progress(
+    items: Iterable[T], what: str, unit: str = "item", stream: TextIO | None = None
+) -> Iterator[T]:
+    stream = stream or sys.stderr
+    total = len(items) if isinstance(items, Sized) else None
+    if not stream.isatty() or (total is not None and total < MINIMUM_ITEMS):
+        return iter(items)
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return iter(items)
+    return iter(tqdm(items, desc=what, total=total, unit=unit, file=stream, leave=False))

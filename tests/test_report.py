@@ -1,0 +1,166 @@
+"""`kasparctl report`: figures that load, and the paper's numbers computed independently."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import statistics
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import pytest
+from matplotlib.image import imread
+from research_fixtures import Study, counted_trials, make_study, raw_records
+
+from kasparctl.cli import main
+
+FIGURES = ("entropy_by_trial", "final_q", "trials_to_learn", "feedback_by_child")
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory: pytest.TempPathFactory) -> Study:
+    return make_study(tmp_path_factory.mktemp("study"))
+
+
+@pytest.fixture(scope="module")
+def report(study: Study, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("report")
+    assert main(["report", "--state-dir", str(study.state_dir), "--out", str(out)]) == 0
+    return out
+
+
+def expected_by_condition(study: Study) -> dict[str, dict[str, Any]]:
+    """The paper's figures straight from the JSON lines, without kasparctl's statistics."""
+    trials_by_label: dict[str, list[list[dict[str, Any]]]] = {}
+    sessions: dict[str, int] = {}
+    for session_id, planned in study.planned.items():
+        spoken = "spoken" if planned.speak_uncertainty else "silent"
+        # The fixture mixes variants, so the variant is part of each label.
+        label = f"{planned.profile}/{spoken} ({planned.variant})"
+        sessions[label] = sessions.get(label, 0) + 1
+        trials = counted_trials(raw_records(study.state_dir / "sessions" / session_id))
+        problems: dict[int, list[dict[str, Any]]] = {}
+        for trial in trials:
+            problems.setdefault(trial["target_index"], []).append(trial)
+        trials_by_label.setdefault(label, []).extend(problems.values())
+    expected = {}
+    for label, problems in trials_by_label.items():
+        learned = [p for p in problems if p[-1]["learned"]]
+        lengths = [len(p) for p in learned]
+        pairs = [pair for p in problems for pair in itertools.pairwise(p)]
+        trials = [t for p in problems for t in p]
+        longest = max(len(p) for p in problems)
+        expected[label] = {
+            "sessions": sessions[label],
+            "problems": len(problems),
+            "problems_learned": len(learned),
+            "trials_total": len(trials),
+            "trials_mean": statistics.mean(lengths) if lengths else None,
+            "trials_sd": statistics.stdev(lengths)
+            if len(lengths) > 1
+            else (0.0 if lengths else None),
+            "trials_min": min(lengths, default=None),
+            "trials_max": max(lengths, default=None),
+            "first_guess_correct": sum(1 for p in problems if p[0]["correct"]),
+            "perseverative_errors": sum(
+                1 for a, b in pairs if a["feedback"] == "red" and b["choice"] == a["choice"]
+            ),
+            "win_shifts": sum(
+                1 for a, b in pairs if a["feedback"] == "green" and b["choice"] != a["choice"]
+            ),
+            "initial_entropy": statistics.mean(p[0]["entropy"] for p in problems),
+            "final_entropy_mean": (
+                statistics.mean(p[-1]["entropy"] for p in learned) if learned else None
+            ),
+            "wrong_green": sum(1 for t in trials if t["feedback"] == "green" and not t["correct"]),
+            "wrong_red": sum(1 for t in trials if t["feedback"] == "red" and t["correct"]),
+            "entropy_by_trial": [
+                statistics.mean(p[k]["entropy"] for p in problems if len(p) > k)
+                for k in range(longest)
+            ],
+        }
+    return expected
+
+
+def test_summary_numbers_equal_those_computed_from_the_raw_records(
+    study: Study, report: Path
+) -> None:
+    summary = json.loads((report / "summary.json").read_text())
+    expected = expected_by_condition(study)
+    found = {c["condition"]: c for c in summary["conditions"]}
+    assert set(found) == set(expected)
+    for label, numbers in expected.items():
+        for key, value in numbers.items():
+            assert found[label][key] == pytest.approx(value), (label, key)
+    everything = summary["all"]
+    assert everything["trials_total"] == sum(e["trials_total"] for e in expected.values())
+    assert everything["problems"] == sum(e["problems"] for e in expected.values())
+    assert everything["wrong_green"] == sum(e["wrong_green"] for e in expected.values()) > 0
+    # The session stopped mid-problem and the one interrupted count in their conditions.
+    assert everything["stopped"] == 1 and everything["interrupted"] == 1
+    assert everything["undone"] == 1
+
+
+def test_markdown_shows_the_conditions_side_by_side(study: Study, report: Path) -> None:
+    text = (report / "summary.md").read_text()
+    header = next(line for line in text.splitlines() if line.startswith("|  |"))
+    labels = [cell.strip() for cell in header.strip("|").split("|")][1:]
+    summary = json.loads((report / "summary.json").read_text())
+    assert labels == [c["condition"] for c in summary["conditions"]] + ["all"]
+    trials_row = next(line for line in text.splitlines() if line.startswith("| Trials |"))
+    cells = [cell.strip() for cell in trials_row.strip("|").split("|")][1:]
+    assert cells == [str(c["trials_total"]) for c in summary["conditions"]] + [
+        str(summary["all"]["trials_total"])
+    ]
+
+
+def test_every_figure_is_written_and_loads(report: Path) -> None:
+    for name in FIGURES:
+        png = report / f"{name}.png"
+        assert png.read_bytes()[:8] == PNG_SIGNATURE
+        pixels = imread(png)
+        assert pixels.ndim == 3 and pixels.shape[0] > 300 and pixels.shape[1] > 500, name
+        # Not a blank canvas: something was drawn.
+        assert pixels[..., :3].std() > 0.05, name
+        root = ET.parse(report / f"{name}.svg").getroot()
+        assert root.tag == "{http://www.w3.org/2000/svg}svg"
+    summary = json.loads((report / "summary.json").read_text())
+    assert summary["figures"] == list(FIGURES) and summary["notes"] == []
+
+
+def test_one_condition_gets_one_column_and_one_panel(
+    study: Study, report: Path, tmp_path: Path
+) -> None:
+    g1 = next(s for s, p in study.planned.items() if p.group == "G1")
+    assert main(["report", g1, "--state-dir", str(study.state_dir), "--out", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert [c["condition"] for c in summary["conditions"]] == ["paper/spoken"]
+    assert "| all |" not in (tmp_path / "summary.md").read_text()
+    # The heat maps are side by side: five conditions make a far wider figure than one.
+    one = imread(tmp_path / "final_q.png").shape[1]
+    five = imread(report / "final_q.png").shape[1]
+    assert five > 3 * one
+
+
+def test_without_matplotlib_the_error_names_the_extra(
+    study: Study, tmp_path: Path, monkeypatch, capsys
+) -> None:
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    code = main(["report", "--state-dir", str(study.state_dir), "--out", str(tmp_path / "r")])
+    assert code == 1
+    assert "pip install 'kasparctl[report]'" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
+def test_the_robots_modules_do_not_import_matplotlib() -> None:
+    import subprocess
+
+    code = (
+        "import sys, kasparctl.cli, kasparctl.commands.report, kasparctl.research.figures;"
+        "kasparctl.cli.build_parser(); print('matplotlib' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
