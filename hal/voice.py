@@ -53,6 +53,8 @@ from hal.voice_settings import VoiceSettings
 
 log = structlog.get_logger("kaspar.voice")
 
+# How long close() waits for a retired pyttsx3 thread to end.
+CLOSE_GRACE_S = 2.0
 # How often a retired pyttsx3 thread is checked for having ended; until it
 # has, no new engine is built and the fallback engine speaks.
 THREAD_EXIT_POLL = 0.05
@@ -289,6 +291,9 @@ class Pyttsx3Thread:
     def alive(self) -> bool:
         return self._thread.is_alive()
 
+    def join(self, timeout: float) -> None:
+        self._thread.join(timeout)
+
     @property
     def usable(self) -> bool:
         return self.alive and not self._retired and self.failure is None
@@ -465,9 +470,14 @@ class Voice:
             self._worker.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._worker
-        for engine in (self._pyttsx3, self._retiring):
-            if engine is not None:
-                engine.retire()
+        engines = [engine for engine in (self._pyttsx3, self._retiring) if engine is not None]
+        for engine in engines:
+            engine.retire()
+        # libespeak-ng is one library state per process: let a retiring engine end
+        # before another can start, or its teardown resets the new one's settings.
+        # A thread stuck in the library is not waited for beyond the grace.
+        for engine in engines:
+            await asyncio.to_thread(engine.join, CLOSE_GRACE_S)
         if self._exit_watch is not None:
             self._exit_watch.cancel()
         self._sink.close()
