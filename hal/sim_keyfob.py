@@ -84,12 +84,17 @@ class SimKeyfob:
     async def perform(self, action: str) -> None:
         """Press the keys of one action, then wait until its gestures are certain."""
         async with self._lock:
+            # Key times are the planned ones, as a real keyfob's carry the kernel's
+            # timestamps: a process stalled mid-press (a busy machine, a fast
+            # simulated clock) must not turn a child's press into a long press.
+            planned = self._clock.now()
             for step in self._steps(action):
                 if isinstance(step, float):
-                    await self._wait(step)
+                    planned += step
+                    await self._wait_until(planned)
                 else:
                     button, down = step
-                    self._publish(self._recogniser.key(button, down, self._clock.now()))
+                    self._publish(self._recogniser.key(button, down, planned))
             await self._settle()
 
     def _steps(self, action: str) -> list[float | tuple[str, bool]]:
@@ -118,9 +123,8 @@ class SimKeyfob:
             return []
         raise ValueError(f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}")
 
-    async def _wait(self, seconds: float) -> None:
+    async def _wait_until(self, until: float) -> None:
         """Sleep on the clock, delivering any gesture whose time comes meanwhile."""
-        until = self._clock.now() + seconds
         while (deadline := self._recogniser.next_deadline()) is not None and deadline <= until:
             await self._clock.sleep(max(0.0, deadline - self._clock.now()))
             self._publish(self._recogniser.advance(deadline))
