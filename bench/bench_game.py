@@ -20,12 +20,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-import msgspec
-
 from kasparctl import simtime
-from kasparctl.commands.demo import _variant
 from kasparctl.config import Config
-from kasparctl.demo import DemoOptions, build, demo_config, run_demo
+from kasparctl.demo import DemoOptions, build, demo_config, run_demo, with_variant
 from kasparctl.game_state import GameState
 from kasparctl.log import configure_logging
 from kasparctl.replicate import replicate
@@ -40,7 +37,7 @@ GAMES_TARGET = 50.0
 
 def config_for(variant: str) -> Config:
     config = demo_config()
-    return msgspec.structs.replace(config, game=_variant(config.game, variant))
+    return with_variant(config, variant)
 
 
 def percentile(values: list[float], q: float) -> float:

@@ -26,9 +26,8 @@ from pathlib import Path
 import msgspec
 
 from kasparctl.cli import main
-from kasparctl.commands.demo import _variant
 from kasparctl.config import SessionPlan
-from kasparctl.demo import DemoOptions, demo_config, run_demo
+from kasparctl.demo import DemoOptions, demo_config, run_demo, with_variant
 from kasparctl.log import configure_logging
 from kasparctl.teacher import Teacher
 
@@ -45,7 +44,7 @@ def make_one(arguments: tuple[Path, int]) -> None:
     variant = "names" if (index // len(CONDITIONS)) % 2 == 0 else "pilot"
     # One group code per session: parallel workers never race for a session id.
     plan = SessionPlan(group=f"B{index:04d}", profile=profile, speak_uncertainty=spoken)
-    config = msgspec.structs.replace(config, game=_variant(config.game, variant), sessions=(plan,))
+    config = msgspec.structs.replace(with_variant(config, variant), sessions=(plan,))
     # Its own state directory while it plays: the demo resumes any unfinished session
     # it finds, and would take over another worker's game in progress.
     scratch = state_dir / ".making" / str(index)

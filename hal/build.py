@@ -6,6 +6,8 @@ import sys
 from dataclasses import dataclass
 from typing import TextIO
 
+import msgspec
+
 from hal.clock import Clock
 from hal.input_api import KeyfobInput
 from hal.keyfob_settings import KeyfobSettings
@@ -37,8 +39,6 @@ def build(
     A simulated keyfob reads keys from `sim_keys` (standard input by default:
     g green, r red, G long green, ...); a simulated voice prints to `sim_lines`.
     """
-    import msgspec
-
     if sim:
         servos = msgspec.structs.replace(servos, backend="sim")
     built_servos = build_servos(servos, clock)

@@ -33,6 +33,24 @@ from kasparctl.simulate import draw_answer_key
 from kasparctl.teacher import Teacher
 
 
+def with_variant(config: Config, variant: str) -> Config:
+    """The demo robot playing the names game or the pilot (three locations it can point at)."""
+    if variant == config.game.variant:
+        return config
+    if variant == "pilot":
+        poses = {
+            "box": {"right_shoulder_pitch": -40.0, "right_shoulder_roll": 10.0},
+            "shelf": {"right_shoulder_pitch": -70.0, "right_shoulder_roll": 40.0},
+            "basket": {"right_shoulder_pitch": -30.0, "right_shoulder_roll": 70.0},
+        }
+        game = msgspec.structs.replace(
+            config.game, variant="pilot", locations=tuple(poses), poses=poses
+        )
+    else:
+        game = msgspec.structs.replace(config.game, variant="names", locations=(), poses={})
+    return msgspec.structs.replace(config, game=game)
+
+
 def demo_config() -> Config:
     """The demo's built-in robot: Kaspar 3's head, face and pointing arm, simulated."""
     text = resources.files("kasparctl").joinpath("demo.toml").read_text(encoding="utf-8")

@@ -21,9 +21,8 @@ import msgspec
 
 from hal.servo_api import FaultKind
 from kasparctl import simtime
-from kasparctl.commands.demo import _variant
 from kasparctl.config import Config, SessionPlan
-from kasparctl.demo import DemoOptions, DemoRig, build, demo_config
+from kasparctl.demo import DemoOptions, DemoRig, build, demo_config, with_variant
 from kasparctl.session import RECORDS_FILE, STATE_FILE
 from kasparctl.teacher import Teacher
 
@@ -70,9 +69,7 @@ def config_for(planned: Planned) -> Config:
         speak_uncertainty=planned.speak_uncertainty,
         children=planned.children,
     )
-    return msgspec.structs.replace(
-        config, game=_variant(config.game, planned.variant), sessions=(plan,)
-    )
+    return msgspec.structs.replace(with_variant(config, planned.variant), sessions=(plan,))
 
 
 def on_event(

@@ -14,20 +14,18 @@ import pytest
 
 from hal.servo_api import FaultKind
 from kasparctl import simtime
-from kasparctl.commands.demo import _variant
 from kasparctl.config import Config
-from kasparctl.demo import DemoOptions, DemoResult, DemoRig, build, demo_config
+from kasparctl.demo import DemoOptions, DemoResult, DemoRig, build, demo_config, with_variant
 from kasparctl.game import STATES, TRANSITIONS, Game
 from kasparctl.session import RECORDS_FILE
 from kasparctl.teacher import Teacher
 
 
 def config_for(variant: str = "names", **game_changes: Any) -> Config:
-    config = demo_config()
-    game = _variant(config.game, variant)
-    if game_changes:
-        game = msgspec.structs.replace(game, **game_changes)
-    return msgspec.structs.replace(config, game=game)
+    config = with_variant(demo_config(), variant)
+    if not game_changes:
+        return config
+    return msgspec.structs.replace(config, game=msgspec.structs.replace(config.game, **game_changes))
 
 
 def records_of(result: DemoResult | Path) -> list[dict[str, Any]]:

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import msgspec
 import pytest
 
-from kasparctl.commands.demo import _variant
-from kasparctl.demo import demo_config
+from kasparctl.demo import demo_config, with_variant
 from kasparctl.replicate import replicate
 from kasparctl.simulate import simulate_study
 from kasparctl.study_stats import summarise
@@ -16,7 +14,7 @@ from kasparctl.teacher import Teacher
 @pytest.mark.parametrize("teacher", [Teacher(), Teacher(p_wrong_green=0.1, p_wrong_red=0.1)])
 def test_demo_games_agree_with_the_simulator(teacher: Teacher) -> None:
     config = demo_config()
-    config = msgspec.structs.replace(config, game=_variant(config.game, "pilot"))
+    config = with_variant(config, "pilot")
     games = replicate(config, games=80, first_seed=1000, teacher=teacher)
     simulated = summarise(
         simulate_study(4000, config.game, config.profile("paper"), teacher, seed=5)

@@ -15,10 +15,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-import msgspec
-
-from kasparctl.config import ConfigError, GameSettings, load_config
-from kasparctl.demo import DemoOptions, DemoStalled, demo_config, run_demo
+from kasparctl.config import ConfigError, load_config
+from kasparctl.demo import DemoOptions, DemoStalled, demo_config, run_demo, with_variant
 from kasparctl.learner import LearnerError
 from kasparctl.log import configure_logging
 from kasparctl.phrases import PhraseError
@@ -52,13 +50,17 @@ def register(subparsers: Any) -> None:
 
 
 def run(arguments: argparse.Namespace) -> int:
+    if arguments.interactive and arguments.fast:
+        # Simulated time would rush through every prompt before a person could type.
+        print("error: --interactive: needs real or --speed time, not --fast", file=sys.stderr)
+        return 1
     if arguments.speed is not None and not arguments.speed > 0:
         print(f"error: --speed: expected a number > 0, found {arguments.speed}", file=sys.stderr)
         return 1
     try:
         config = load_config(arguments.config) if arguments.config else demo_config()
         if arguments.variant and arguments.variant != config.game.variant:
-            config = msgspec.structs.replace(config, game=_variant(config.game, arguments.variant))
+            config = with_variant(config, arguments.variant)
         teacher = Teacher(arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)
     except (ConfigError, TeacherError, LearnerError) as error:
         print(f"error: {error}", file=sys.stderr)
@@ -82,15 +84,3 @@ def run(arguments: argparse.Namespace) -> int:
     if arguments.json:
         print(json.dumps(result.summary()))
     return 0
-
-
-def _variant(game: GameSettings, variant: str) -> GameSettings:
-    if variant == "pilot":
-        locations = ("box", "shelf", "basket")
-        poses = {
-            "box": {"right_shoulder_pitch": -40.0, "right_shoulder_roll": 10.0},
-            "shelf": {"right_shoulder_pitch": -70.0, "right_shoulder_roll": 40.0},
-            "basket": {"right_shoulder_pitch": -30.0, "right_shoulder_roll": 70.0},
-        }
-        return msgspec.structs.replace(game, variant="pilot", locations=locations, poses=poses)
-    return msgspec.structs.replace(game, variant="names", locations=(), poses={})
