@@ -29,3 +29,10 @@ def test_missing_keyfob_is_named_and_fails(tmp_path: Path, capsys) -> None:
     assert main(["check", "--config", path]) == 1
     out = capsys.readouterr().out
     assert "keyfob         FAIL  not found:" in out and str(missing) in out
+
+
+def test_quiet_check_renders_the_voice_without_playing_it(tmp_path: Path, capsys) -> None:
+    # No wav_dir: the real player (aplay) would be used, and --quiet must not need it.
+    path = config(tmp_path, "backend = 'sim'", "player = ['/nonexistent/player']")
+    assert main(["check", "--config", path, "--quiet"]) == 0
+    assert "voice          ok    rendered the test line silently via espeak-ng" in capsys.readouterr().out
