@@ -7,7 +7,7 @@ leave one record behind.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -168,7 +168,3 @@ def find_sessions(state_dir: Path | None, names: Sequence[str]) -> list[Path]:
                 "a session directory's path works too)"
             )
     return found
-
-
-def load_sessions(directories: Iterable[Path]) -> list[SessionData]:
-    return [load_session(directory) for directory in directories]
