@@ -429,3 +429,20 @@ def test_stop_works_even_while_a_fault_will_not_clear(tmp_path: Path) -> None:
     assert ("pause", False, "the hardware is still faulty") in commands
     assert commands[-1] == ("stop", True, None)
     assert result.final_state == "stopped"
+
+
+def test_while_children_teach_only_the_pointing_arm_is_compliant(tmp_path: Path) -> None:
+    seen: list[dict[str, bool]] = []
+
+    async def scenario(rig: DemoRig) -> None:
+        for bag in range(3):
+            await on_event(rig, "teach", lambda info, bag=bag: info["bag"] == bag)
+            seen.append({joint: rig.servos.servo(joint).torque for joint in rig.servos.joints})
+
+    result, rig, _ = play(tmp_path, scenario=scenario)
+    arm = set(rig.servos.groups["right_arm"])
+    for torque in seen:
+        assert {joint for joint, on in torque.items() if not on} == arm
+    # After teaching every joint holds again, and nothing was left limp.
+    assert all(rig.servos.servo(joint).torque for joint in rig.servos.joints)
+    assert result.finished
