@@ -447,8 +447,9 @@ class Game:
         if task is not None and not task.done():
             self.hw.voice.cancel()
             task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+            # wait(), not `await task`: the step's own CancelledError stays inside it,
+            # while a cancellation of this task (the daemon stopping) still gets through.
+            await asyncio.wait({task})
         if self._answer is not None and not self._answer.done():
             self._answer.cancel()
         self._answer = None
