@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from kasparctl.config import GameSettings
-from kasparctl.learner import LearnerParams, LearnerState
+from kasparctl.learner import PLAIN_DATA_ERRORS, LearnerParams, LearnerState
 from kasparctl.problem import TargetProgress
 
 # The game's steps in order; the pilot variant starts at "guessing".
@@ -173,6 +173,10 @@ class GameState:
     def from_plain(cls, data: dict[str, Any]) -> GameState:
         try:
             previous = data["previous"]
+            if previous is not None and len(previous) != 2:
+                raise ValueError(f"previous: expected [choice, green], found {previous!r}")
+            if not isinstance(data["poses"], dict):
+                raise TypeError(f"poses: expected a table, found {data['poses']!r}")
             return cls(
                 step=str(data["step"]),
                 learner=LearnerState.from_plain(data["learner"]),
@@ -188,7 +192,8 @@ class GameState:
                 undo=data["undo"],
                 paused=bool(data["paused"]),
             )
-        except (KeyError, TypeError, ValueError) as error:
+        except PLAIN_DATA_ERRORS as error:
+            # (LearnerError is a ValueError: a bad learner table or generator lands here too.)
             raise StateError(f"unusable game state snapshot: {error!r}") from error
 
 

@@ -180,6 +180,18 @@ def choose_batch(probabilities: FloatArray, rng: np.random.Generator) -> NDArray
     return np.minimum(index, last_possible)
 
 
+# What numpy and the standard library raise for plain data of the wrong shape.
+PLAIN_DATA_ERRORS = (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError)
+
+_BIT_GENERATORS = {
+    "PCG64": np.random.PCG64,
+    "PCG64DXSM": np.random.PCG64DXSM,
+    "MT19937": np.random.MT19937,
+    "Philox": np.random.Philox,
+    "SFC64": np.random.SFC64,
+}
+
+
 @dataclass(slots=True)
 class LearnerState:
     """A Q table and the random generator of the learner's choices.
@@ -206,11 +218,14 @@ class LearnerState:
         try:
             table = np.array(data["q"], dtype=np.float64)
             generator_state = data["rng"]
-            bit_generator_cls = getattr(np.random, generator_state["bit_generator"])
-            bit_generator = bit_generator_cls()
+            name = generator_state["bit_generator"]
+            # Only numpy's bit generators: a snapshot must not name any other callable.
+            if name not in _BIT_GENERATORS:
+                raise ValueError(f"bit_generator: expected one of {sorted(_BIT_GENERATORS)}")
+            bit_generator = _BIT_GENERATORS[name]()
             bit_generator.state = generator_state
-        except (KeyError, TypeError, ValueError, AttributeError) as error:
-            raise LearnerError(f"unusable learner state: {error}") from error
+        except PLAIN_DATA_ERRORS as error:
+            raise LearnerError(f"unusable learner state: {error!r}") from error
         if table.ndim != 2 or table.size == 0 or not np.isfinite(table).all():
             raise LearnerError(f"learner state q must be a finite 2-D table, found {data['q']!r}")
         return cls(table, np.random.Generator(bit_generator))
