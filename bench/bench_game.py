@@ -86,6 +86,44 @@ def press_to_action_ms(games: int, state_root: Path) -> list[float]:
     return latencies
 
 
+def stop_to_rest_s(games: int, state_root: Path) -> list[float]:
+    """Robot time from the researcher's both-buttons stop to every joint at rest."""
+    took: list[float] = []
+
+    async def one(seed: int) -> None:
+        rig = build(
+            config_for("pilot"),
+            DemoOptions(state_dir=state_root / f"stop-{seed}", seed=seed, out=io.StringIO()),
+        )
+        asked = asyncio.Event()
+        rig.game.listeners.append(
+            lambda event, info: asked.set() if event == "question" and info["trial"] == 3 else None
+        )
+
+        async def researcher() -> None:
+            await asked.wait()
+            await asyncio.sleep(0.5)  # mid-reaction: Kaspar is talking and may be moving
+            await rig.keyfob.perform("both")
+
+        stopper = asyncio.create_task(researcher())
+        loop = asyncio.get_running_loop()
+        await rig.run()
+        stopper.cancel()
+        # rest() returns once the last goal is sent; the joints still travel to it.
+        rest = {j.name: j.rest_deg for j in rig.servos.settings.joints}
+        while any(abs(rig.servos.true_position(j) - rest[j]) >= 1.0 for j in rest):
+            await asyncio.sleep(0.02)
+        ended = loop.time()
+        session = rig.game.session
+        assert session is not None
+        both = next(r for r in session.records() if r.get("command") == "stop")
+        took.append(ended - both["at"])
+
+    for seed in range(games):
+        simtime.run(one(seed), virtual=True)
+    return took
+
+
 def games_per_second(variant: str, games: int, state_root: Path) -> float:
     config = config_for(variant)
     start = time.perf_counter()
@@ -134,6 +172,12 @@ def main() -> None:
         f"p99 {p99:.2f} ms over "
         f"{len(latencies)} answers, state on disk (target p99 < {LATENCY_TARGET_MS:g} ms) "
         f"{'PASS' if p99 < LATENCY_TARGET_MS else 'FAIL'}"
+    )
+    stops = stop_to_rest_s(10, disk)
+    print(
+        f"stop gesture (both held, from key-down) to every joint at rest: median "
+        f"{statistics.median(stops):.2f} s, max {max(stops):.2f} s of robot time "
+        f"(the 1 s hold, then the rest at each joint's speed limit, goodbye said on the way)"
     )
     for variant in ("pilot", "names"):
         for label, root in (("disk", disk), ("tmpfs", tmpfs)):

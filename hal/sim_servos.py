@@ -154,6 +154,8 @@ class SimServos(Joints):
     def true_position(self, joint: str) -> float:
         """Where the simulated joint really is, in degrees (for tests and the demo)."""
         settings = next(j for j in self.settings.joints if j.name == joint)
+        # Motion is simulated lazily, at each bus operation: bring it up to now first.
+        self.drivers[settings.bus]._advance()
         return settings.servo.to_degrees(
             self.servo(joint).present, settings.direction, settings.offset_deg
         )

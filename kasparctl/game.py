@@ -329,10 +329,11 @@ class Game:
             self._record("command", applied=True, confirm=key, **fields)
         else:
             await self._fire(command)
-        if not speaks_first:
-            await self._announce(f"confirm.{key}")
         if command is Command.STOP:
-            await self._rest_safely()
+            # To rest at once, saying goodbye on the way: safety does not wait for words.
+            await asyncio.gather(self._announce(f"confirm.{key}"), self._rest_safely())
+        elif not speaks_first:
+            await self._announce(f"confirm.{key}")
 
     def _applicable(self, command: Command) -> str | None:
         """The confirmation key of a command in the current state, or None if it does not apply."""

@@ -446,3 +446,54 @@ def test_while_children_teach_only_the_pointing_arm_is_compliant(tmp_path: Path)
     # After teaching every joint holds again, and nothing was left limp.
     assert all(rig.servos.servo(joint).torque for joint in rig.servos.joints)
     assert result.finished
+
+
+def test_every_motion_path_of_the_game_stays_in_range_and_under_speed(tmp_path: Path) -> None:
+    """The safety audit's end-to-end check (docs/safety-audit.md): pointing at configured
+    poses far outside the ranges, taught poses, expressions, a resume after a fault, the
+    stop gesture's rest. Every joint, sampled as the simulated robot really moves, stays in
+    its range and never moves faster than its limit."""
+    wild = {"right_shoulder_pitch": -500.0, "right_shoulder_roll": 500.0, "right_elbow": 1e6}
+    config = config_for(
+        "pilot",
+        poses={"box": wild, "shelf": {"right_elbow": -1e6}, "basket": wild},
+        happy_pose={"smile": 400.0, "head_pitch": -400.0},
+        sad_pose={"head_pitch": 400.0, "head_yaw": -1e9},
+    )
+    samples: list[tuple[float, dict[str, float]]] = []
+
+    async def sample(rig: DemoRig) -> None:
+        while True:
+            now = asyncio.get_running_loop().time()
+            samples.append((now, {j: rig.servos.true_position(j) for j in rig.servos.joints}))
+            await asyncio.sleep(0.05)
+
+    async def scenario(rig: DemoRig) -> None:
+        sampler = asyncio.create_task(sample(rig))
+        try:
+            await on_event(rig, "question", lambda info: info["trial"] == 3)
+            rig.servos.inject_fault("head_yaw", FaultKind.OVERLOAD)
+            await on_event(rig, "fault")
+            rig.servos.inject_fault("head_yaw", None)
+            await on_event(rig, "question", lambda info: info["trial"] == 6)
+            await rig.keyfob.perform("both")  # stop: rest pose at the speed limits
+            await asyncio.sleep(30)
+        finally:
+            sampler.cancel()
+
+    result, rig, _ = play(tmp_path, config=config, scenario=scenario)
+    assert result.final_state == "stopped"
+    settings = {j.name: j for j in rig.servos.settings.joints}
+    moved = set()
+    for (before, old), (after, new) in zip(samples, samples[1:], strict=False):
+        for joint, degrees in new.items():
+            limits = settings[joint]
+            unit = limits.servo.degrees_per_unit
+            assert limits.range_deg[0] - unit <= degrees <= limits.range_deg[1] + unit, joint
+            speed = abs(degrees - old[joint]) / (after - before)
+            assert speed <= limits.max_speed_dps * 1.01 + unit / (after - before), (joint, before)
+            if abs(degrees - old[joint]) > unit:
+                moved.add(joint)
+    # The wild poses really were attempted: the arm and the face moved, to their limits.
+    assert {"right_shoulder_pitch", "right_elbow", "smile", "head_pitch"} <= moved
+    assert min(s[1]["right_shoulder_pitch"] for s in samples) == pytest.approx(-90.0, abs=1.0)
