@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import io
+import itertools
 import json
 from collections.abc import Callable, Coroutine
 from pathlib import Path
@@ -485,7 +486,7 @@ def test_every_motion_path_of_the_game_stays_in_range_and_under_speed(tmp_path: 
     assert result.final_state == "stopped"
     settings = {j.name: j for j in rig.servos.settings.joints}
     moved = set()
-    for (before, old), (after, new) in zip(samples, samples[1:], strict=False):
+    for (before, old), (after, new) in itertools.pairwise(samples):
         for joint, degrees in new.items():
             limits = settings[joint]
             unit = limits.servo.degrees_per_unit
