@@ -22,6 +22,21 @@ DEMO_CONFIG = REPO / "kasparctl" / "demo.toml"
 WATCHDOG_USEC = 600_000  # pings expected every 0.3 s
 
 
+def run_command(state_dir: Path) -> list[str]:
+    """The service on the demo robot's simulated hardware, keeping its sessions in state_dir."""
+    return [
+        sys.executable,
+        "-m",
+        "kasparctl",
+        "run",
+        "--sim",
+        "--config",
+        str(DEMO_CONFIG),
+        "--state-dir",
+        str(state_dir),
+    ]
+
+
 class NotifyListener:
     def __init__(self, path: Path) -> None:
         self.socket = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
@@ -61,17 +76,7 @@ def daemon(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], NotifyListen
     }
     env.pop("WATCHDOG_PID", None)
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "kasparctl",
-            "run",
-            "--sim",
-            "--config",
-            str(DEMO_CONFIG),
-            "--state-dir",
-            str(state_dir),
-        ],
+        run_command(state_dir),
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -126,17 +131,7 @@ def test_ready_status_watchdog_and_a_clean_stop(daemon) -> None:
 
 def test_a_restart_resumes_the_session(tmp_path: Path) -> None:
     state_dir = tmp_path / "state"
-    command = [
-        sys.executable,
-        "-m",
-        "kasparctl",
-        "run",
-        "--sim",
-        "--config",
-        str(DEMO_CONFIG),
-        "--state-dir",
-        str(state_dir),
-    ]
+    command = run_command(state_dir)
     first = subprocess.Popen(
         command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
