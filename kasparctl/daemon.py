@@ -40,7 +40,7 @@ from kasparctl.game_state import GameState, restore
 from kasparctl.log import configure_logging
 from kasparctl.phrases import PhrasePicker, load_phrasebook
 from kasparctl.sdnotify import Notifier, watchdog_interval
-from kasparctl.session import Session, find_unfinished, session_dirs
+from kasparctl.session import PLAN_FILE, Session, find_unfinished, is_finished, session_dirs
 
 log = structlog.get_logger("kasparctl.daemon")
 
@@ -216,11 +216,9 @@ class Daemon:
             return SessionPlan(group="unplanned")
         done = set()
         for directory in session_dirs(self.state_dir):
-            with contextlib.suppress(OSError, msgspec.DecodeError, KeyError):
-                if (directory / "state.json").exists() and msgspec.json.decode(
-                    (directory / "state.json").read_bytes()
-                ).get("finished"):
-                    done.add(msgspec.json.decode((directory / "plan.json").read_bytes())["group"])
+            if is_finished(directory):
+                with contextlib.suppress(OSError, msgspec.DecodeError, KeyError, TypeError):
+                    done.add(msgspec.json.decode((directory / PLAN_FILE).read_bytes())["group"])
         return next((plan for plan in plans if plan.group not in done), plans[-1])
 
     # -- signals, reload, watchdog ------------------------------------------------------

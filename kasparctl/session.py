@@ -242,8 +242,7 @@ class Session:
 
     @property
     def finished(self) -> bool:
-        snapshot = self._read_snapshot()
-        return bool(snapshot and snapshot.get("finished"))
+        return is_finished(self.directory)
 
     # -- records --------------------------------------------------------------
 
@@ -288,15 +287,19 @@ def session_dirs(state_dir: Path) -> Iterator[Path]:
         yield from sorted(p for p in sessions.iterdir() if (p / PLAN_FILE).is_file())
 
 
+def is_finished(directory: Path) -> bool:
+    """Whether a session's last snapshot says it ended (finished or stopped)."""
+    try:
+        snapshot = msgspec.json.decode((directory / STATE_FILE).read_bytes())
+    except (OSError, msgspec.DecodeError):
+        return False
+    return isinstance(snapshot, dict) and bool(snapshot.get("finished"))
+
+
 def find_unfinished(state_dir: Path) -> Path | None:
     """The most recent session that did not finish, if any: it is resumed, not restarted."""
     unfinished = None
     for directory in session_dirs(state_dir):
-        snapshot_path = directory / STATE_FILE
-        try:
-            finished = bool(msgspec.json.decode(snapshot_path.read_bytes()).get("finished"))
-        except (OSError, msgspec.DecodeError, AttributeError):
-            finished = False
-        if not finished:
+        if not is_finished(directory):
             unfinished = directory
     return unfinished

@@ -7,62 +7,17 @@ import os
 import signal
 import socket
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from service_fixtures import NotifyListener, run_command
 
 from kasparctl.sdnotify import Notifier, watchdog_interval
 from kasparctl.session import RECORDS_FILE, STATE_FILE
 
-REPO = Path(__file__).resolve().parents[1]
-DEMO_CONFIG = REPO / "kasparctl" / "demo.toml"
 WATCHDOG_USEC = 600_000  # pings expected every 0.3 s
-
-
-def run_command(state_dir: Path) -> list[str]:
-    """The service on the demo robot's simulated hardware, keeping its sessions in state_dir."""
-    return [
-        sys.executable,
-        "-m",
-        "kasparctl",
-        "run",
-        "--sim",
-        "--config",
-        str(DEMO_CONFIG),
-        "--state-dir",
-        str(state_dir),
-    ]
-
-
-class NotifyListener:
-    def __init__(self, path: Path) -> None:
-        self.socket = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-        self.socket.bind(str(path))
-        self.messages: list[tuple[float, str]] = []
-
-    def collect(self, seconds: float) -> list[tuple[float, str]]:
-        end = time.monotonic() + seconds
-        got = []
-        while (left := end - time.monotonic()) > 0:
-            self.socket.settimeout(left)
-            try:
-                data = self.socket.recv(4096)
-            except TimeoutError:
-                break
-            got.append((time.monotonic(), data.decode()))
-        self.messages += got
-        return got
-
-    def wait_for(self, field: str, seconds: float = 30.0) -> float:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            for at, message in self.collect(min(0.5, end - time.monotonic())):
-                if field in message.split("\n"):
-                    return at
-        raise AssertionError(f"{field} never arrived; got {[m for _, m in self.messages][-10:]}")
 
 
 @pytest.fixture
@@ -178,3 +133,18 @@ def test_watchdog_interval_is_half_of_watchdog_usec(monkeypatch: pytest.MonkeyPa
     assert watchdog_interval() is None
     monkeypatch.delenv("WATCHDOG_USEC")
     assert watchdog_interval() is None
+
+
+def test_next_session_is_the_first_planned_group_not_finished(tmp_path: Path) -> None:
+    from kasparctl.daemon import Daemon, DaemonOptions
+    from kasparctl.session import Session
+
+    example = Path(__file__).resolve().parents[1] / "systemd" / "kaspar.toml"  # groups A1, A2
+    daemon = Daemon(DaemonOptions(str(example), sim=True, state_dir=str(tmp_path)), Notifier(""))
+    assert daemon._next_plan().group == "A1"
+    unfinished = Session.create(tmp_path, {"group": "A1"})
+    assert daemon._next_plan().group == "A1"  # interrupted, not done
+    unfinished.save_state({}, finished=True)
+    assert daemon._next_plan().group == "A2"
+    Session.create(tmp_path, {"group": "A2"}).save_state({}, finished=True)
+    assert daemon._next_plan().group == "A2"  # all done: the last group plays again

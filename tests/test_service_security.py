@@ -16,18 +16,16 @@ import signal
 import socket
 import stat
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from service_fixtures import DEMO_CONFIG, NotifyListener, run_command
 
 from kasparctl.cli import main
 
-REPO = Path(__file__).resolve().parents[1]
-DEMO_CONFIG = REPO / "kasparctl" / "demo.toml"
 PLAN_NAMES = ("Sam", "Alex", "Kim")
 
 pytestmark = pytest.mark.skipif(
@@ -124,28 +122,6 @@ def listening_sockets(pid: int) -> list[dict[str, Any]]:
     return problems
 
 
-class NotifyListener:
-    """The systemd end of NOTIFY_SOCKET, as in tests/test_daemon.py."""
-
-    def __init__(self, path: Path) -> None:
-        self.socket = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-        self.socket.bind(str(path))
-        self.messages: list[str] = []
-
-    def wait_for(self, field: str, seconds: float = 30.0) -> None:
-        end = time.monotonic() + seconds
-        while (left := end - time.monotonic()) > 0:
-            self.socket.settimeout(min(left, 0.5))
-            try:
-                message = self.socket.recv(4096).decode()
-            except TimeoutError:
-                continue
-            self.messages.append(message)
-            if field in message.split("\n"):
-                return
-        raise AssertionError(f"{field} never arrived; got {self.messages[-10:]}")
-
-
 @pytest.fixture
 def service(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], NotifyListener]]:
     notify_path = tmp_path / "notify.sock"
@@ -154,17 +130,7 @@ def service(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], NotifyListe
     for name in ("WATCHDOG_USEC", "WATCHDOG_PID", "LISTEN_FDS", "LISTEN_PID"):
         env.pop(name, None)
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "kasparctl",
-            "run",
-            "--sim",
-            "--config",
-            str(DEMO_CONFIG),
-            "--state-dir",
-            str(tmp_path / "state"),
-        ],
+        run_command(tmp_path / "state"),
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
