@@ -28,6 +28,7 @@ from typing import Any, TypeVar
 import serial
 import structlog
 
+from hal.clock import thread_work
 from hal.errors import BusClosed, BusTimeout, CodecError, PortUnavailable, RepeatFilter
 
 log = structlog.get_logger("hal.bus")
@@ -157,7 +158,7 @@ class SerialBus:
             if remaining <= 0:
                 return False
             self._state_changed.clear()
-            with contextlib.suppress(TimeoutError):
+            with contextlib.suppress(TimeoutError), thread_work(asyncio.get_running_loop()):
                 await asyncio.wait_for(self._state_changed.wait(), remaining)
         return True
 
@@ -209,7 +210,8 @@ class SerialBus:
         # A watchdog far beyond the thread's own deadlines: it only fires if the thread is stuck.
         watchdog = attempts * (self.retries + 1) + 5.0
         try:
-            return await asyncio.wait_for(future, watchdog)
+            with thread_work(loop):
+                return await asyncio.wait_for(future, watchdog)
         except TimeoutError:
             raise BusTimeout(f"bus {self.name}: the bus thread did not answer") from None
 

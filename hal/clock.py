@@ -8,7 +8,9 @@ virtual clock that jumps ahead instead of waiting.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
+from collections.abc import Iterator
 from typing import Protocol
 
 
@@ -38,3 +40,20 @@ class LoopClock:
 
     async def sleep(self, seconds: float) -> None:
         await asyncio.sleep(seconds)
+
+
+@contextlib.contextmanager
+def thread_work(loop: asyncio.AbstractEventLoop) -> Iterator[None]:
+    """Mark a wait for a thread's real I/O: a simulated clock stands still meanwhile.
+
+    On the robot's loop this does nothing. Under kasparctl.simtime's virtual
+    clock the loop would otherwise jump to its next timer while a bus thread
+    waits for a servo's reply, so a 20 ms serial timeout would cost whole
+    simulated seconds and an emulated servo would seem to move instantly.
+    """
+    hold = getattr(loop, "hold_clock", None)
+    if hold is None:
+        yield
+        return
+    with hold():
+        yield

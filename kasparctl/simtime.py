@@ -9,18 +9,26 @@ loop, so the same code runs on the robot and in simulated time:
   clock, so a person can watch a game at 10x.
 
 I/O is still polled for real (with a zero timeout), so threads that wake the
-loop with call_soon_threadsafe keep working.
+loop with call_soon_threadsafe keep working. A wait marked with
+hal.clock.thread_work (a serial bus thread talking to a pty emulator) holds
+the virtual clock: the loop waits for the thread for real instead of jumping,
+so real drivers run in simulated time with their real timeouts.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import selectors
 import time
-from collections.abc import Coroutine
+from collections.abc import Coroutine, Iterator
 from typing import Any, TypeVar
 
 T = TypeVar("T")
+
+# While the clock is held, the loop waits for a thread this long (real seconds) per
+# turn; the thread's call_soon_threadsafe wakes it sooner.
+HELD_WAIT_S = 0.05
 
 
 class _JumpingSelector(selectors.DefaultSelector):
@@ -29,6 +37,7 @@ class _JumpingSelector(selectors.DefaultSelector):
     def __init__(self) -> None:
         super().__init__()
         self.on_idle: Any = None
+        self.held = 0  # waits on threads in flight (hal.clock.thread_work)
 
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         events = super().select(0)
@@ -37,6 +46,10 @@ class _JumpingSelector(selectors.DefaultSelector):
         if timeout is None:
             # Nothing scheduled: only another thread can wake us, so wait for real.
             return super().select(None)
+        if self.held:
+            # A thread is doing real I/O for the loop: jumping now would let simulated
+            # time race past it. Wait for it for real; the clock stands still.
+            return super().select(min(timeout, HELD_WAIT_S))
         # Nothing was ready, so jumping to the timer is all there is to do this turn.
         self.on_idle(timeout)
         return []
@@ -48,11 +61,21 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     def __init__(self) -> None:
         selector = _JumpingSelector()
         super().__init__(selector)
+        self._selector_held = selector
         self._virtual_now = 0.0
         selector.on_idle = self._advance
 
     def time(self) -> float:
         return self._virtual_now
+
+    @contextlib.contextmanager
+    def hold_clock(self) -> Iterator[None]:
+        """The clock stands still until this ends (see hal.clock.thread_work)."""
+        self._selector_held.held += 1
+        try:
+            yield
+        finally:
+            self._selector_held.held -= 1
 
     def _advance(self, seconds: float) -> None:
         self._virtual_now += seconds
@@ -82,8 +105,9 @@ class ScaledTimeLoop(asyncio.SelectorEventLoop):
 def run(main: Coroutine[Any, Any, T], speed: float | None = None, virtual: bool = False) -> T:
     """asyncio.run on a real, scaled or virtual clock.
 
-    A thread's work (run_in_executor) takes no virtual time: the simulated
-    hardware has no threads, so in simulated time nothing races the jump.
+    In virtual time a thread's work takes no simulated time: a wait marked with
+    hal.clock.thread_work holds the clock until the thread answers; other thread
+    work (run_in_executor) is not waited for, which the simulated hardware never needs.
     """
     factory: Any = None
     if virtual:

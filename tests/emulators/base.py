@@ -35,10 +35,10 @@ class Axis:
     goal: float
     rate: float
     torque: bool = False
-    stamp: float = field(default_factory=time.monotonic)
+    stamp: float | None = None  # the emulator clock's time of the last update
 
     def update(self, now: float) -> int:
-        if self.torque:
+        if self.torque and self.stamp is not None:
             step = self.rate * (now - self.stamp)
             delta = self.goal - self.present
             self.present = self.goal if abs(delta) <= step else self.present + step * (
@@ -51,7 +51,10 @@ class Axis:
 class Emulator:
     """Serves one pty from its own thread until stop(); subclasses decode and answer packets."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, clock: Callable[[], float] = time.monotonic) -> None:
+        # The shafts move on this clock: the wall clock, or a simulated game's loop
+        # time (read from this thread; a float read needs no lock).
+        self.clock = clock
         self.port = PtyPort(path)
         self.faults = Faults()
         self.received: list[bytes] = []  # every well-framed request, for assertions

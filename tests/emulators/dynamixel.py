@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from emulators.base import Axis, Emulator, split_with
@@ -13,7 +14,10 @@ from hal import dynamixel2 as dx2
 class Dynamixel1Emulator(Emulator):
     """AX-12A servos: a 50-byte control table each, status return level honoured."""
 
-    def __init__(self, path: Path, ids: list[int], rate: float = 1200.0) -> None:
+    def __init__(
+        self, path: Path, ids: list[int], rate: float = 1200.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.tables: dict[int, bytearray] = {}
         self.axes: dict[int, Axis] = {}
         for servo_id in ids:
@@ -31,7 +35,7 @@ class Dynamixel1Emulator(Emulator):
             table[dx1.AX12.GOAL_POSITION : dx1.AX12.GOAL_POSITION + 2] = dx1.le16(512)
             self.tables[servo_id] = table
             self.axes[servo_id] = Axis(512, 512, rate)
-        super().__init__(path)
+        super().__init__(path, clock)
 
     def split(self, buffer: bytes) -> tuple[bytes | None, bytes]:
         return split_with(dx1.HEAD_SIZE, dx1.HEADER, dx1.packet_length, buffer)
@@ -45,7 +49,7 @@ class Dynamixel1Emulator(Emulator):
         table, axis = self.tables[servo_id], self.axes[servo_id]
         axis.torque = bool(table[dx1.AX12.TORQUE_ENABLE])
         axis.goal = dx1.u16(table, dx1.AX12.GOAL_POSITION)
-        present = axis.update(time.monotonic())
+        present = axis.update(self.clock())
         table[dx1.AX12.PRESENT_POSITION : dx1.AX12.PRESENT_POSITION + 2] = dx1.le16(present)
         table[dx1.AX12.MOVING] = int(present != axis.goal)
 
@@ -91,7 +95,10 @@ class Dynamixel1Emulator(Emulator):
 class Dynamixel2Emulator(Emulator):
     """XL430 servos: Protocol 2.0 with SYNC_READ, BULK_READ and REBOOT."""
 
-    def __init__(self, path: Path, ids: list[int], rate: float = 4000.0) -> None:
+    def __init__(
+        self, path: Path, ids: list[int], rate: float = 4000.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.tables: dict[int, bytearray] = {}
         self.axes: dict[int, Axis] = {}
         for servo_id in ids:
@@ -108,7 +115,7 @@ class Dynamixel2Emulator(Emulator):
             table[dx2.XSeries.GOAL_POSITION : dx2.XSeries.GOAL_POSITION + 4] = dx2.le32(2048)
             self.tables[servo_id] = table
             self.axes[servo_id] = Axis(2048, 2048, rate)
-        super().__init__(path)
+        super().__init__(path, clock)
 
     def split(self, buffer: bytes) -> tuple[bytes | None, bytes]:
         return split_with(dx2.HEAD_SIZE, dx2.HEADER, dx2.packet_length, buffer)
@@ -121,7 +128,7 @@ class Dynamixel2Emulator(Emulator):
         table, axis = self.tables[servo_id], self.axes[servo_id]
         axis.torque = bool(table[dx2.XSeries.TORQUE_ENABLE])
         axis.goal = dx2.s32(table, dx2.XSeries.GOAL_POSITION)
-        present = axis.update(time.monotonic())
+        present = axis.update(self.clock())
         table[dx2.XSeries.PRESENT_POSITION : dx2.XSeries.PRESENT_POSITION + 4] = dx2.le32(present)
         table[dx2.XSeries.MOVING] = int(present != axis.goal)
         table[dx2.XSeries.HARDWARE_ERROR_STATUS] = self.faults.error_bits.get(servo_id, 0)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from emulators.base import Axis, Emulator, split_with
@@ -10,7 +11,10 @@ from hal import herkulex as hx
 
 
 class HerkulexEmulator(Emulator):
-    def __init__(self, path: Path, ids: list[int], rate: float = 1100.0) -> None:
+    def __init__(
+        self, path: Path, ids: list[int], rate: float = 1100.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.ram: dict[int, bytearray] = {}
         self.axes: dict[int, Axis] = {}
         for servo_id in ids:
@@ -22,7 +26,7 @@ class HerkulexEmulator(Emulator):
             ram[hx.Ram.CALIBRATED_POSITION : hx.Ram.CALIBRATED_POSITION + 2] = hx.le16(512)
             self.ram[servo_id] = ram
             self.axes[servo_id] = Axis(512, 512, rate)
-        super().__init__(path)
+        super().__init__(path, clock)
 
     def split(self, buffer: bytes) -> tuple[bytes | None, bytes]:
         return split_with(hx.HEAD_SIZE, hx.HEADER, hx.packet_length, buffer)
@@ -37,7 +41,7 @@ class HerkulexEmulator(Emulator):
     def _refresh(self, servo_id: int) -> None:
         ram, axis = self.ram[servo_id], self.axes[servo_id]
         axis.torque = ram[hx.Ram.TORQUE_CONTROL] == hx.TorqueControl.ON
-        present = axis.update(time.monotonic())
+        present = axis.update(self.clock())
         ram[hx.Ram.CALIBRATED_POSITION : hx.Ram.CALIBRATED_POSITION + 2] = hx.le16(present)
         error = self.faults.error_bits.get(servo_id, 0)
         ram[hx.Ram.STATUS_ERROR] = error

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from emulators.base import Axis, Emulator
@@ -10,12 +11,15 @@ from hal import maestro as mo
 
 
 class MaestroEmulator(Emulator):
-    def __init__(self, path: Path, channels: int = 12, rate: float = 40000.0) -> None:
+    def __init__(
+        self, path: Path, channels: int = 12, rate: float = 40000.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.channels = channels
         self.axes = [Axis(6000, 6000, rate) for _ in range(channels)]
         self.targets = [0] * channels
         self.errors = 0
-        super().__init__(path)
+        super().__init__(path, clock)
 
     def split(self, buffer: bytes) -> tuple[bytes | None, bytes]:
         while buffer and buffer[0] < 0x80:
@@ -38,7 +42,7 @@ class MaestroEmulator(Emulator):
             self.errors |= mo.Errors.SERIAL_PROTOCOL
             return
         axis = self.axes[channel]
-        axis.update(time.monotonic())
+        axis.update(self.clock())
         self.targets[channel] = target
         axis.torque = target != 0  # target 0 stops the pulses: the servo goes limp
         if target:
@@ -57,14 +61,14 @@ class MaestroEmulator(Emulator):
                 self._set(args[0] + offset, target)
         elif command is mo.Command.GET_POSITION:
             channel = args[0]
-            position = round(self.axes[channel].update(time.monotonic())) if channel < self.channels else 0
+            position = round(self.axes[channel].update(self.clock())) if channel < self.channels else 0
             return [(channel, bytes((position & 0xFF, position >> 8)))]
         elif command is mo.Command.GET_ERRORS:
             errors = self.errors | self.faults.error_bits.get(0, 0)
             self.errors = 0
             return [(0, bytes((errors & 0xFF, errors >> 8)))]
         elif command is mo.Command.GET_MOVING_STATE:
-            now = time.monotonic()
+            now = self.clock()
             moving = any(a.update(now) != round(a.goal) for a in self.axes if a.torque)
             return [(0, bytes((int(moving),)))]
         return []
