@@ -159,7 +159,8 @@ class SerialBus:
                 return False
             self._state_changed.clear()
             with contextlib.suppress(TimeoutError), thread_work(asyncio.get_running_loop()):
-                await asyncio.wait_for(self._state_changed.wait(), remaining)
+                async with asyncio.timeout(remaining):
+                    await self._state_changed.wait()
         return True
 
     def transaction_timeout(self, request_bytes: int, reply_bytes: int, replies: int) -> float:
@@ -210,8 +211,12 @@ class SerialBus:
         # A watchdog far beyond the thread's own deadlines: it only fires if the thread is stuck.
         watchdog = attempts * (self.retries + 1) + 5.0
         try:
+            # asyncio.timeout, not wait_for: on Python 3.11 wait_for returns the reply and
+            # drops a cancellation that lands in the same loop turn as the reply, and a
+            # game step paused at that instant would carry on (found by the soak).
             with thread_work(loop):
-                return await asyncio.wait_for(future, watchdog)
+                async with asyncio.timeout(watchdog):
+                    return await future
         except TimeoutError:
             raise BusTimeout(f"bus {self.name}: the bus thread did not answer") from None
 
@@ -220,7 +225,8 @@ class SerialBus:
             self._state = BusState.CLOSED
             return
         self._jobs.put(_STOP)
-        await asyncio.to_thread(self._thread.join, 5.0)
+        with thread_work(asyncio.get_running_loop()):
+            await asyncio.to_thread(self._thread.join, 5.0)
         self._thread = None
         self._set_state(BusState.CLOSED)
 

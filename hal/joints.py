@@ -100,6 +100,7 @@ class Joints:
         self._repeats = RepeatFilter()
         self._poll_task: asyncio.Task[None] | None = None
         self._last_status: dict[str, JointStatus] = {}
+        self._retried_seen: dict[ServoDriver, int] = {}
         self.step = 1.0 / settings.control_hz
 
     @classmethod
@@ -336,6 +337,20 @@ class Joints:
             if kind is not None:
                 self._repeat(joint.name, kind.value, detail)
                 await self._latch(joint.name, kind, detail or kind.value)
+        self._log_retries()
+
+    def _log_retries(self) -> None:
+        """Replies the bus had to retry since the last poll: one line per poll at most.
+
+        A retried reply never reaches the game, so without this a failing cable or a
+        noisy bus would leave no trace until it stopped a session.
+        """
+        for name, driver in self._drivers.items():
+            total = driver.retried()
+            seen = self._retried_seen.get(driver, 0)
+            if total > seen:
+                log.warning("bus replies retried", bus=name, count=total - seen, total=total)
+            self._retried_seen[driver] = total
 
     # --- internals ----------------------------------------------------------------------
 

@@ -370,8 +370,11 @@ class DirectoryWatch:
     async def changed(self, timeout: float) -> None:
         """Wait for a change, or `timeout` seconds (the safety net)."""
         assert self._changed is not None
+        # asyncio.timeout, not wait_for: on Python 3.11 wait_for can swallow a
+        # cancellation that lands as the awaited thing completes.
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self._changed.wait(), timeout)
+            async with asyncio.timeout(timeout):
+                await self._changed.wait()
         self._changed.clear()
 
 

@@ -174,6 +174,10 @@ class ServoDriver(Protocol):
         """Clear the servos' own latched error state (where the protocol latches one)."""
         ...
 
+    def retried(self) -> int:
+        """Replies retried on this bus so far (corrupt or late, then good); 0 when simulated."""
+        ...
+
 
 def build_servos(settings: ServoSettings, clock: Clock) -> ServoApi:
     """The configured backend: the real buses, or the simulated servos."""

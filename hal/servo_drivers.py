@@ -53,6 +53,9 @@ class _BusDriver:
     async def close(self) -> None:
         await self.bus.close()
 
+    def retried(self) -> int:
+        return self.bus.stats.retries
+
     async def _ask(
         self, servo_id: int, request: bytes, decode: Callable[[list[bytes]], Any], expect: int
     ) -> Any:

@@ -106,6 +106,9 @@ class SimDriver:
     async def reset_errors(self, ids: Sequence[int]) -> None:
         return None  # a simulated fault lasts until inject_fault(joint, None)
 
+    def retried(self) -> int:
+        return 0  # a simulated bus never corrupts a reply
+
     async def read_health(self, servo_id: int) -> Health:
         self._advance()
         servo = self._answering(servo_id)

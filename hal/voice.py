@@ -521,7 +521,7 @@ class Voice:
                 await asyncio.wait({task})
                 self._current = None
             spoken = self._outcome(request, task, started)
-            if spoken.status is not SpokenStatus.FINISHED:
+            if spoken.status in (SpokenStatus.TIMED_OUT, SpokenStatus.FAILED):
                 log.warning(
                     "voice fault", status=spoken.status.value, text=request.text, error=spoken.error
                 )

@@ -283,7 +283,8 @@ class Daemon:
             return
         hw.voice.cancel()
         try:
-            await asyncio.wait_for(hw.servos.rest(), REST_TIMEOUT_S)
+            async with asyncio.timeout(REST_TIMEOUT_S):
+                await hw.servos.rest()
             if self.config.daemon.stop_action == "torque_off":
                 for group in hw.servos.groups:
                     await hw.servos.set_compliant(group, True)

@@ -13,22 +13,24 @@ import sys
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Generic, Protocol, TextIO, TypeVar
 
 import msgspec
 import numpy as np
 
 from hal.clock import LoopClock
+from hal.servo_api import ServoApi
 from hal.sim_keyfob import SimKeyfob, TerminalKeyfob
 from hal.sim_servos import SimServos
 from hal.sim_voice import SimVoice
+from hal.voice_api import VoiceOutput
 from kasparctl import simtime
 from kasparctl.config import Config, SessionPlan, parse_config
 from kasparctl.game import Game, Hardware
 from kasparctl.game_state import GameState, restore
 from kasparctl.phrases import PhrasePicker, load_phrasebook
 from kasparctl.session import Session, find_unfinished
-from kasparctl.sim_children import SimulatedGroup
+from kasparctl.sim_children import MAX_RESUMES, Hands, SimulatedGroup
 from kasparctl.simulate import draw_answer_key
 from kasparctl.teacher import Teacher
 
@@ -82,14 +84,21 @@ class DemoResult:
         return dataclasses.asdict(self)
 
 
+class RigServos(ServoApi, Hands, Protocol):
+    """Servos the simulated children can move by hand: SimServos, or real drivers on emulators."""
+
+
+ServosT = TypeVar("ServosT", bound=RigServos)
+
+
 @dataclass
-class DemoRig:
+class DemoRig(Generic[ServosT]):
     """The simulated robot, the game on it, and the simulated group: built, not yet running."""
 
     game: Game
-    servos: SimServos
+    servos: ServosT
     keyfob: SimKeyfob
-    voice: SimVoice
+    voice: VoiceOutput
     children: SimulatedGroup | None
     resumed: bool
     state_dir: Path
@@ -124,21 +133,34 @@ class DemoRig:
 
 def build(
     config: Config, options: DemoOptions, children_answers: list[int] | None = None
-) -> DemoRig:
+) -> DemoRig[SimServos]:
     """Assemble the simulated robot and (or resume) a session in options.state_dir.
 
     `children_answers` makes the simulated children believe other answers than
     the plan's answer key (to show the learner does not see the key).
     """
     clock = LoopClock()
+    servos = SimServos(config.servos, clock)
+    return assemble(config, options, servos, SimVoice(options.out, clock), children_answers)
+
+
+def assemble(
+    config: Config,
+    options: DemoOptions,
+    servos: ServosT,
+    voice: VoiceOutput,
+    children_answers: list[int] | None = None,
+    *,
+    patience: int = MAX_RESUMES,
+) -> DemoRig[ServosT]:
+    """build() with the servos and the voice given, e.g. real drivers on pty emulators."""
+    clock = LoopClock()
     out = options.out
 
     def narrate(text: str) -> None:
         out.write(f"[{clock.now():10.3f}]   ({text})\n")
 
-    servos = SimServos(config.servos, clock)
     keyfob = TerminalKeyfob(clock) if options.interactive else SimKeyfob(clock)
-    voice = SimVoice(out, clock)
     book = load_phrasebook(config.language, config.phrases_dir)
     picker = PhrasePicker(book, np.random.default_rng([options.seed, 2]))
     plan = config.sessions[0] if config.sessions else SessionPlan(group="demo")
@@ -177,6 +199,7 @@ def build(
             np.random.default_rng([options.seed, 1, progress]),
             pointing_group=config.game.pointing_group,
             narrate=narrate,
+            patience=patience,
         )
         game.listeners.append(children)
     game.listeners.append(_narrator(narrate))
@@ -240,7 +263,8 @@ def run_demo(
     async def bounded() -> DemoResult:
         rig = build(config, options)
         try:
-            return await asyncio.wait_for(rig.run(), STALL_LIMIT_S)
+            async with asyncio.timeout(STALL_LIMIT_S):
+                return await rig.run()
         except TimeoutError:
             raise DemoStalled(
                 f"no end after {STALL_LIMIT_S:.0f} simulated seconds, in state {rig.game.state}"

@@ -44,6 +44,11 @@ log = structlog.get_logger(__name__)
 
 CHILD_WORDS = ("child one", "child two", "child three", "child four", "child five", "child six")
 PAUSABLE = ("placing", "teaching", "revealing", "guessing")
+# A fault can stop these; farewell too, since it moves the robot to rest (found by the soak:
+# a servo fault during farewell left the game in farewell for good).
+FAULTABLE = (*PAUSABLE, "farewell")
+# How long a cancelled step may take to end before it is cancelled again.
+STEP_CANCEL_GRACE_S = 1.0
 STATES = ("idle", *STEPS, "finished", "paused", "fault", "stopped")
 
 
@@ -63,14 +68,14 @@ def _transitions() -> list[dict[str, Any]]:
         {"trigger": "advance", "source": "guessing", "dest": "farewell", "conditions": "all_done"},
         {"trigger": "advance", "source": "farewell", "dest": "finished"},
         {"trigger": "pause", "source": list(PAUSABLE), "dest": "paused"},
-        {"trigger": "fail", "source": ["idle", *PAUSABLE, "paused"], "dest": "fault"},
+        {"trigger": "fail", "source": ["idle", *FAULTABLE, "paused"], "dest": "fault"},
         {"trigger": "stop", "source": [*STEPS, "paused", "fault"], "dest": "stopped"},
     ]
-    for step in PAUSABLE:
+    for step in FAULTABLE:
         table.append(
             {
                 "trigger": "resume",
-                "source": ["paused", "fault"],
+                "source": ["paused", "fault"] if step in PAUSABLE else "fault",
                 "dest": step,
                 "conditions": f"returns_to_{step}",
             }
@@ -162,7 +167,7 @@ class Game:
             initial = self.data.step if self.data.step in STATES else "idle"
             if self.data.paused and initial in PAUSABLE:
                 self._resume_to, initial = initial, "paused"
-        for step in ("idle", *PAUSABLE):
+        for step in ("idle", *FAULTABLE):
             setattr(self, f"returns_to_{step}", lambda step=step: self._resume_to == step)
         self.machine = AsyncMachine(
             model=self,
@@ -314,6 +319,7 @@ class Game:
             return
         if self.state == "fault" and command is Command.PAUSE and not await self._rearm():
             self._record("command", applied=False, ignored="the hardware is still faulty", **fields)
+            self._emit("resume_refused")
             await self._announce("fault.problem")
             return
         if command is Command.PAUSE and self.data is not None:
@@ -450,7 +456,14 @@ class Game:
             task.cancel()
             # wait(), not `await task`: the step's own CancelledError stays inside it,
             # while a cancellation of this task (the daemon stopping) still gets through.
-            await asyncio.wait({task})
+            await asyncio.wait({task}, timeout=STEP_CANCEL_GRACE_S)
+            while not task.done():
+                # A library swallowed the cancellation (as asyncio.wait_for can on 3.11);
+                # waiting for ever would leave the game deaf to every gesture.
+                log.warning("a step carried on after being cancelled; cancelling again",
+                            step=task.get_name())
+                task.cancel()
+                await asyncio.wait({task}, timeout=STEP_CANCEL_GRACE_S)
         if self._answer is not None and not self._answer.done():
             self._answer.cancel()
         self._answer = None
@@ -473,7 +486,11 @@ class Game:
             "fault", fault=fault.kind, detail=fault.detail, joint=fault.joint, state=self.state
         )
         log.warning("fault", fault=fault.kind, detail=fault.detail, joint=fault.joint)
-        if self.state in (*PAUSABLE, "paused", "idle"):
+        if self.state == "fault":
+            # Said once per stop: an unplugged bus latches every joint on it, and six
+            # announcements would keep the researcher's resume waiting for half a minute.
+            return
+        if self.state in (*FAULTABLE, "paused", "idle"):
             if self.state != "paused":
                 self._resume_to = self.state
             await self.fail()
@@ -699,7 +716,9 @@ class Game:
         for index, key in enumerate(prompts):
             delay = delays[min(index, len(delays) - 1)]
             with contextlib.suppress(TimeoutError):
-                return await asyncio.wait_for(asyncio.shield(answer), delay)
+                # Not wait_for: on Python 3.11 it can drop a pause that lands as the answer does.
+                async with asyncio.timeout(delay):
+                    return await asyncio.shield(answer)
             self._record("prompt", line=key, waited=delay)
             self._emit("prompt", line=key)
             await self._say(key)

@@ -11,17 +11,29 @@ under test is the game on the robot.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
+from hal.servo_settings import ServoSettings
 from hal.sim_keyfob import SimKeyfob
-from hal.sim_servos import SimServos
 from kasparctl.teacher import Teacher
 
 Say = Callable[[str], None]
 MAX_RESUMES = 3
+
+
+class Hands(Protocol):
+    """Servos a child can move by hand while they are limp (simulated or emulated)."""
+
+    @property
+    def settings(self) -> ServoSettings: ...
+
+    @property
+    def groups(self) -> Mapping[str, tuple[str, ...]]: ...
+
+    def push(self, joint: str, degrees: float) -> None: ...
 
 
 class SimulatedGroup:
@@ -30,7 +42,7 @@ class SimulatedGroup:
     def __init__(
         self,
         keyfob: SimKeyfob,
-        servos: SimServos,
+        servos: Hands,
         teacher: Teacher,
         answers: Sequence[int],
         rng: np.random.Generator,
@@ -39,6 +51,7 @@ class SimulatedGroup:
         think_s: tuple[float, float] = (0.8, 2.5),
         researcher_s: float = 1.5,
         narrate: Say | None = None,
+        patience: int = MAX_RESUMES,
     ) -> None:
         self.keyfob = keyfob
         self.servos = servos
@@ -51,9 +64,14 @@ class SimulatedGroup:
         self.narrate = narrate or (lambda text: None)
         self._tasks: set[asyncio.Task[None]] = set()
         self._silent_question: tuple[int, int] | None = None
+        self.patience = patience
         self._faults = 0
+        self._state = "idle"
+        self._resuming = False
 
     def __call__(self, event: str, info: dict[str, Any]) -> None:
+        if event == "state":
+            self._state = str(info["state"])
         if event == "waiting_for_researcher":
             self._spawn(self._researcher_next())
         elif event == "question":
@@ -64,7 +82,9 @@ class SimulatedGroup:
             self._spawn(self._answer(target, choice, honest_now=True))
         elif event == "teach":
             self._spawn(self._teach(int(info["bag"])))
-        elif (event == "fault" and info.get("kind") != "keyfob") or event == "keyfob_back":
+        elif _calls_researcher(event, info) and not self._resuming:
+            # One researcher at a time: a fault can be announced twice.
+            self._resuming = True
             self._spawn(self._researcher_resumes())
 
     async def close(self) -> None:
@@ -90,14 +110,19 @@ class SimulatedGroup:
         await self._press("long green", "the researcher")
 
     async def _researcher_resumes(self) -> None:
-        # The researcher checks the robot, then resumes with the usual gesture; after
-        # a few faults in a row they end the session safely instead.
-        self._faults += 1
-        await asyncio.sleep(self.researcher_s * 2)
-        if self._faults > MAX_RESUMES:
-            await self._press("both", "the researcher")
-        else:
-            await self._press("long red", "the researcher")
+        # The researcher checks the robot, then resumes with the usual gesture (again,
+        # if the robot refused); after `patience` tries they end the session safely.
+        try:
+            await asyncio.sleep(self.researcher_s * 2)
+            if self._state != "fault":
+                return  # resumed already, or over
+            self._faults += 1
+            if self._faults > self.patience:
+                await self._press("both", "the researcher")
+            else:
+                await self._press("long red", "the researcher")
+        finally:
+            self._resuming = False
 
     async def _answer(self, target: int, choice: int, honest_now: bool = False) -> None:
         correct = choice == self.answers[target]
@@ -123,3 +148,9 @@ class SimulatedGroup:
         self.narrate(f"a child moves Kaspar's arm towards bag {bag + 1}")
         await asyncio.sleep(0.5)
         await self._press("green", "another child")
+
+
+def _calls_researcher(event: str, info: dict[str, Any]) -> bool:
+    """A fault the researcher resumes from (a lost keyfob only once it is back)."""
+    lost_keyfob = event == "fault" and info.get("kind") == "keyfob"
+    return (event == "fault" and not lost_keyfob) or event in ("keyfob_back", "resume_refused")

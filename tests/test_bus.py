@@ -156,3 +156,25 @@ async def test_the_loop_is_never_blocked_by_a_slow_transaction(ax12, driver):
         await driver.read_positions([1])  # about 3 x 0.1 s of waiting, all on the bus thread
     task.cancel()
     assert ticks >= 5
+
+
+async def test_a_cancellation_that_lands_with_the_reply_still_cancels(ax12, driver, monkeypatch):
+    # Found by the soak: with asyncio.wait_for on Python 3.11, a pause arriving in the
+    # same loop turn as a servo's reply was dropped, the game step carried on, and the
+    # game waited for ever for that step to end.
+    from hal import bus as bus_module
+
+    loop = asyncio.get_running_loop()
+    reader: asyncio.Task | None = None
+    settle = bus_module._Job.resolve
+
+    def settle_then_cancel(self, result=None, error=None) -> None:
+        settle(self, result, error)
+        loop.call_soon_threadsafe(reader.cancel)  # queued right behind the reply
+
+    monkeypatch.setattr(bus_module._Job, "resolve", settle_then_cancel)
+    reader = asyncio.create_task(driver.read_positions([1]))
+    with pytest.raises(asyncio.CancelledError):
+        await reader
+    monkeypatch.undo()
+    assert 1 in await driver.read_positions([1])  # the bus is still fine

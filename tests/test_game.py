@@ -344,6 +344,87 @@ def test_servo_fault_in_step_four_and_recovery(tmp_path: Path) -> None:
     assert result.finished
 
 
+def test_a_lost_bus_is_said_once_recorded_per_joint_and_resumed_at_once(tmp_path: Path) -> None:
+    # Found by the soak: an unplugged adapter latches every joint on the bus, and the
+    # game used to announce each one (half a minute of "my ... is not working") while
+    # the researcher's resume waited behind them, and was then applied out of date.
+    async def scenario(rig: DemoRig) -> None:
+        await on_event(rig, "question", lambda info: info["trial"] == 2)
+        for joint in rig.servos.joints:
+            rig.servos.inject_fault(joint, FaultKind.BUS_LOST)
+        await on_event(rig, "fault")
+        await asyncio.sleep(1.0)
+        for joint in rig.servos.joints:
+            rig.servos.inject_fault(joint, None)  # the adapter is back
+
+    result, rig, out = play(tmp_path, scenario=scenario, seed=2)
+    records = records_of(result)
+    lost = [r for r in records if r["kind"] == "fault" and "bus_lost" in r["detail"]]
+    assert {r["joint"] for r in lost} == set(rig.servos.joints)
+    said = [line for line in out.splitlines() if "Kaspar:" in line and "grown-up" in line]
+    assert len(said) == 1, said
+    commands = [r for r in records if r["kind"] == "command" and r["command"] == "pause"]
+    # One resume, taken in the fault state: no stale press paused the game afterwards.
+    assert [(c["confirm"], c["state"]) for c in commands] == [("resume", "fault")]
+    assert_trials_whole(records)
+    assert result.finished
+
+
+def test_a_servo_fault_during_farewell_is_resumed_and_the_game_finishes(tmp_path: Path) -> None:
+    # Found by the soak: farewell was not a state a fault could stop, so a servo that
+    # went silent while Kaspar said goodbye left the game in farewell for good.
+    async def scenario(rig: DemoRig) -> None:
+        await on_event(rig, "state", lambda info: info["state"] == "farewell")
+        rig.servos.inject_fault("head_yaw", FaultKind.SILENT)
+        await on_event(rig, "fault")
+        await asyncio.sleep(1.0)
+        rig.servos.inject_fault("head_yaw", None)
+
+    result, _, _ = play(tmp_path, config=config_for("pilot"), scenario=scenario)
+    records = records_of(result)
+    assert any(r["kind"] == "fault" and r["state"] == "farewell" for r in records)
+    resumes = [r for r in records if r["kind"] == "command" and r.get("confirm") == "resume"]
+    assert resumes and resumes[0]["state"] == "fault"
+    assert result.finished and result.final_state == "finished"
+
+
+def test_a_step_that_swallows_its_cancellation_is_cancelled_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The game waits for a cancelled step to end before it enters the next state; a
+    # step that carried on (a library dropping the cancellation) used to hang it there.
+    from kasparctl.game import Game
+
+    deaf: list[bool] = []
+    swallowed: list[bool] = []
+    teach_one_bag = Game._teach_one_bag
+
+    async def deaf_once(self: Game, bag: int, group: str) -> None:
+        if not deaf:
+            deaf.append(True)
+            try:
+                await asyncio.Event().wait()
+            except asyncio.CancelledError:
+                swallowed.append(True)  # and carries on, as if the cancel never came:
+                await self._wait_for_press()  # a press that only the blocked run loop gives
+        await teach_one_bag(self, bag, group)
+
+    monkeypatch.setattr(Game, "_teach_one_bag", deaf_once)
+
+    async def scenario(rig: DemoRig) -> None:
+        while not deaf:
+            await asyncio.sleep(0.5)
+        paused = on_event(rig, "state", lambda info: info["state"] == "paused")
+        await rig.keyfob.perform("long red")  # pause
+        await paused
+        await asyncio.sleep(2.0)
+        await rig.keyfob.perform("long red")  # resume
+
+    result, _, _ = play(tmp_path, scenario=scenario)
+    assert swallowed == [True]
+    assert result.finished
+
+
 def test_keyfob_lost_and_back(tmp_path: Path) -> None:
     async def scenario(rig: DemoRig) -> None:
         await on_event(rig, "question", lambda info: info["trial"] == 2)

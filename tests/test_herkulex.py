@@ -166,3 +166,35 @@ async def test_faulty_replies_end_as_a_named_silent_servo(drs, fault):
         assert caught.value.servo_id == 3
     finally:
         await driver.close()
+
+
+async def test_replies_the_bus_had_to_retry_are_logged_once_per_poll_with_their_count(drs):
+    # Found by the soak: a corrupt reply that a retry absorbed left no trace at all,
+    # so a failing cable would go unnoticed until it stopped a session.
+    import structlog
+
+    from hal.clock import MonotonicClock
+    from hal.joints import Joints
+    from hal.servo_settings import BusSettings, JointSettings, ServoSettings
+
+    settings = ServoSettings(
+        buses=(BusSettings(name="head", port=str(drs.path), protocol="herkulex", baud=115200),),
+        joints=(
+            JointSettings(name="head_yaw", bus="head", id=1, model="drs-0101",
+                          range_deg=(-60.0, 60.0), max_speed_dps=60.0, group="head"),
+        ),
+    )
+    driver = make_driver("herkulex", drs.path, baud=115200)
+    joints = Joints(settings, {"head": driver}, MonotonicClock())
+    await joints.start(poll=False)
+    try:
+        with structlog.testing.capture_logs() as logs:
+            await joints.poll_health()
+            drs.faults.corrupt_next = 2  # both absorbed: the bus retries twice
+            await joints.poll_health()
+            await joints.poll_health()
+        retried = [entry for entry in logs if entry["event"] == "bus replies retried"]
+        assert [(r["bus"], r["count"]) for r in retried] == [("head", 2)]
+        assert joints.faults == ()  # absorbed: the game never saw it
+    finally:
+        await joints.close()
