@@ -102,6 +102,9 @@ def check_game(directory: Path) -> dict[str, Any]:
         out["problems"].append("no result: the worker never finished this game")
     elif result.get("stalled"):
         out["problems"].append(f"stalled in state {result.get('final_state')}")
+    if result and result.get("injector_error"):
+        out["problems"].append(f"the fault injector failed: {result['injector_error']}")
+    out["stalled"] = bool(result and result.get("stalled"))
     ledger_path = directory / "ledger.jsonl"
     ledger = [json.loads(line) for line in ledger_path.read_text().splitlines() if line.strip()]
     out["faults"] = [e for e in ledger if e["event"] == "fault"]
@@ -190,6 +193,7 @@ def analyse(root: Path) -> dict[str, Any]:
         "kills_after_end": sum(
             1 for g in games for f in g["faults"] if f.get("landed_after_end")
         ),
+        "stalled": sum(g["stalled"] for g in games),
         "problems": problems[:20],
         "problem_count": len(problems),
     }
@@ -201,7 +205,8 @@ def verdict(report: dict[str, Any]) -> dict[str, bool]:
         "0 trials lost or duplicated": report["trials_lost"] + report["trials_duplicated"] == 0,
         "0 joint-limit or speed violations": report["violations"] == 0,
         "every injected fault recorded": report["injected"] == report["recorded"],
-        "every game ended (finished or stopped)": report["problem_count"] == 0
+        "every game ended cleanly (finished or stopped, no problem found)":
+        report["problem_count"] == 0
         and report["finished"] + report["stopped_by_researcher"] == report["games"],
     }
 
@@ -215,7 +220,7 @@ def soak(games: int, workers: int, seed: int, faults: int, root: Path) -> dict[s
     report["worker_crashes"] = [c for w in pool for c in w.crashes]
     report["crashes"] = (
         len(report["worker_crashes"]) + report["software_faults"]
-        + sum(1 for _, p in report["problems"] if p.startswith("stalled"))
+        + report["stalled"]
     )
     report["targets"] = verdict(report)
     report["state_root"] = str(root)

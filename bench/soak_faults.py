@@ -202,6 +202,7 @@ class Injector:
         heal = await self._inject(kind, info)
         healed_at: float | None = None
         recorded_at: float | None = None
+        recovered_at: float | None = None
         evidence: dict[str, Any] | None = None
         stops_game = kind not in ("corrupt_retried", "tts_hang")
         while True:
@@ -215,10 +216,12 @@ class Injector:
                     if is_evidence(kind, info, entry):
                         recorded_at, evidence = loop.time(), entry
                         break
-            recovered = recorded_at is not None and (
-                not stops_game or self.watch.left_fault_at >= recorded_at
-            )
-            finished = heal is None and (recovered or self.watch.over)
+            if recorded_at is not None and recovered_at is None:
+                if not stops_game:
+                    recovered_at = recorded_at
+                elif self.watch.left_fault_at >= recorded_at:
+                    recovered_at = self.watch.left_fault_at
+            finished = heal is None and (recovered_at is not None or self.watch.over)
             if finished or now > injected + duration + FOLLOW_S:
                 break
             await asyncio.sleep(CHECK_EVERY_S)
@@ -231,11 +234,7 @@ class Injector:
             injected_at=injected,
             healed_after=None if healed_at is None else healed_at - injected,
             recorded_after=None if recorded_at is None else recorded_at - injected,
-            recovered_after=(
-                None
-                if recorded_at is None or (stops_game and self.watch.left_fault_at < recorded_at)
-                else (self.watch.left_fault_at if stops_game else recorded_at) - injected
-            ),
+            recovered_after=None if recovered_at is None else recovered_at - injected,
             game_over=self.watch.over,
             evidence=None if evidence is None else _brief(evidence),
         )

@@ -100,7 +100,7 @@ class Joints:
         self._repeats = RepeatFilter()
         self._poll_task: asyncio.Task[None] | None = None
         self._last_status: dict[str, JointStatus] = {}
-        self._retried_seen: dict[ServoDriver, int] = {}
+        self._retried_seen: dict[str, int] = {}  # bus name -> replies retried, as last logged
         self.step = 1.0 / settings.control_hz
 
     @classmethod
@@ -347,10 +347,10 @@ class Joints:
         """
         for name, driver in self._drivers.items():
             total = driver.retried()
-            seen = self._retried_seen.get(driver, 0)
+            seen = self._retried_seen.get(name, 0)
             if total > seen:
                 log.warning("bus replies retried", bus=name, count=total - seen, total=total)
-            self._retried_seen[driver] = total
+            self._retried_seen[name] = total
 
     # --- internals ----------------------------------------------------------------------
 

@@ -453,17 +453,17 @@ class Game:
         task, self._step_task = self._step_task, None
         if task is not None and not task.done():
             self.hw.voice.cancel()
-            task.cancel()
             # wait(), not `await task`: the step's own CancelledError stays inside it,
             # while a cancellation of this task (the daemon stopping) still gets through.
-            await asyncio.wait({task}, timeout=STEP_CANCEL_GRACE_S)
-            while not task.done():
-                # A library swallowed the cancellation (as asyncio.wait_for can on 3.11);
-                # waiting for ever would leave the game deaf to every gesture.
+            # Again and again: a library that swallowed the cancellation (as wait_for can
+            # on 3.11) must not leave the game waiting for ever, deaf to every gesture.
+            while True:
+                task.cancel()
+                done, _ = await asyncio.wait({task}, timeout=STEP_CANCEL_GRACE_S)
+                if done:
+                    break
                 log.warning("a step carried on after being cancelled; cancelling again",
                             step=task.get_name())
-                task.cancel()
-                await asyncio.wait({task}, timeout=STEP_CANCEL_GRACE_S)
         if self._answer is not None and not self._answer.done():
             self._answer.cancel()
         self._answer = None

@@ -61,7 +61,7 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     def __init__(self) -> None:
         selector = _JumpingSelector()
         super().__init__(selector)
-        self._selector_held = selector
+        self._jumping = selector
         self._virtual_now = 0.0
         selector.on_idle = self._advance
 
@@ -71,11 +71,11 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     @contextlib.contextmanager
     def hold_clock(self) -> Iterator[None]:
         """The clock stands still until this ends (see hal.clock.thread_work)."""
-        self._selector_held.held += 1
+        self._jumping.held += 1
         try:
             yield
         finally:
-            self._selector_held.held -= 1
+            self._jumping.held -= 1
 
     def _advance(self, seconds: float) -> None:
         self._virtual_now += seconds

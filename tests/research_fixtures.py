@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
+from rig_events import on_event
 
 from hal.servo_api import FaultKind
 from kasparctl import simtime
@@ -70,19 +71,6 @@ def config_for(planned: Planned) -> Config:
         children=planned.children,
     )
     return msgspec.structs.replace(with_variant(config, planned.variant), sessions=(plan,))
-
-
-def on_event(
-    rig: DemoRig, wanted: str, when: Callable[[dict[str, Any]], bool]
-) -> asyncio.Future[dict[str, Any]]:
-    future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
-
-    def listener(event: str, info: dict[str, Any]) -> None:
-        if event == wanted and not future.done() and when(info):
-            future.set_result(info)
-
-    rig.game.listeners.append(listener)
-    return future
 
 
 def play(state_dir: Path, planned: Planned, scenario: Scenario | None = None) -> None:

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import socket
+import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -54,3 +58,31 @@ class NotifyListener:
                 if field in message.split("\n"):
                     return at
         raise AssertionError(f"{field} never arrived; got {[m for _, m in self.messages][-10:]}")
+
+
+@contextlib.contextmanager
+def running_service(
+    directory: Path, environment: dict[str, str] | None = None
+) -> Iterator[tuple[subprocess.Popen[str], NotifyListener]]:
+    """The service started as systemd would (NOTIFY_SOCKET, sessions in directory/state);
+    killed at the end if it is still running, its notify socket closed."""
+    listener = NotifyListener(directory / "notify.sock")
+    env = os.environ | {"NOTIFY_SOCKET": str(directory / "notify.sock")}
+    for name in ("WATCHDOG_USEC", "WATCHDOG_PID", "LISTEN_FDS", "LISTEN_PID"):
+        env.pop(name, None)
+    env |= environment or {}
+    process = subprocess.Popen(
+        run_command(directory / "state"),
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        yield process, listener
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.communicate(timeout=30)
+        listener.socket.close()

@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from service_fixtures import NotifyListener, run_command
+from service_fixtures import NotifyListener, run_command, running_service
 
 from kasparctl.sdnotify import Notifier, watchdog_interval
 from kasparctl.session import RECORDS_FILE, STATE_FILE
@@ -22,29 +22,9 @@ WATCHDOG_USEC = 600_000  # pings expected every 0.3 s
 
 @pytest.fixture
 def daemon(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], NotifyListener, Path]]:
-    listener = NotifyListener(tmp_path / "notify.sock")
-    state_dir = tmp_path / "state"
-    env = os.environ | {
-        "NOTIFY_SOCKET": str(tmp_path / "notify.sock"),
-        "WATCHDOG_USEC": str(WATCHDOG_USEC),
-        "KASPAR_DEBUG_LOOP_BLOCK_S": "2.0",
-    }
-    env.pop("WATCHDOG_PID", None)
-    process = subprocess.Popen(
-        run_command(state_dir),
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-    )
-    try:
-        yield process, listener, state_dir
-    finally:
-        if process.poll() is None:
-            process.kill()
-        process.communicate(timeout=30)
-        listener.socket.close()
+    watchdog = {"WATCHDOG_USEC": str(WATCHDOG_USEC), "KASPAR_DEBUG_LOOP_BLOCK_S": "2.0"}
+    with running_service(tmp_path, watchdog) as (process, listener):
+        yield process, listener, tmp_path / "state"
 
 
 def test_ready_status_watchdog_and_a_clean_stop(daemon) -> None:

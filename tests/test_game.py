@@ -12,6 +12,7 @@ from typing import Any
 
 import msgspec
 import pytest
+from rig_events import on_event
 
 from hal.servo_api import FaultKind
 from kasparctl import simtime
@@ -62,20 +63,6 @@ def play(
 
     result, rig = simtime.run(main(), virtual=True)
     return result, rig, out.getvalue()
-
-
-def on_event(
-    rig: DemoRig, wanted: str, when: Callable[[dict[str, Any]], bool] = lambda _: True
-) -> asyncio.Future[dict[str, Any]]:
-    """A future for the first game event `wanted` whose info satisfies `when`."""
-    future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
-
-    def listener(event: str, info: dict[str, Any]) -> None:
-        if event == wanted and not future.done() and when(info):
-            future.set_result(info)
-
-    rig.game.listeners.append(listener)
-    return future
 
 
 def assert_trials_whole(records: list[dict[str, Any]]) -> None:

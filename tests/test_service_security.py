@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from service_fixtures import DEMO_CONFIG, NotifyListener, run_command
+from service_fixtures import DEMO_CONFIG, NotifyListener, running_service
 
 from kasparctl.cli import main
 
@@ -124,26 +124,8 @@ def listening_sockets(pid: int) -> list[dict[str, Any]]:
 
 @pytest.fixture
 def service(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], NotifyListener]]:
-    notify_path = tmp_path / "notify.sock"
-    listener = NotifyListener(notify_path)
-    env = os.environ | {"NOTIFY_SOCKET": str(notify_path)}
-    for name in ("WATCHDOG_USEC", "WATCHDOG_PID", "LISTEN_FDS", "LISTEN_PID"):
-        env.pop(name, None)
-    process = subprocess.Popen(
-        run_command(tmp_path / "state"),
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-    )
-    try:
-        yield process, listener
-    finally:
-        if process.poll() is None:
-            process.kill()
-        process.communicate(timeout=30)
-        listener.socket.close()
+    with running_service(tmp_path) as running:
+        yield running
 
 
 def test_the_running_service_listens_on_nothing(service) -> None:

@@ -29,12 +29,7 @@ def register(subparsers: Any) -> None:
 
 def describe(session: SessionData) -> dict[str, Any]:
     return {
-        "session": session.id,
-        "group": session.group,
-        "condition": session.condition,
-        "profile": session.profile,
-        "speak_uncertainty": session.speak_uncertainty,
-        "variant": session.variant,
+        **session.identity,
         "created": session.created,
         "date": session.date,
         # Undone answers are not trials; they stay in the records and the export.

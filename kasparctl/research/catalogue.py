@@ -62,6 +62,18 @@ class SessionData:
         return str(self.meta.get("variant", ""))
 
     @property
+    def identity(self) -> dict[str, Any]:
+        """The columns that name a session and its condition, first in every table of it."""
+        return {
+            "session": self.id,
+            "group": self.group,
+            "condition": self.condition,
+            "profile": self.profile,
+            "speak_uncertainty": self.speak_uncertainty,
+            "variant": self.variant,
+        }
+
+    @property
     def created(self) -> str:
         return str(self.meta.get("created", ""))
 

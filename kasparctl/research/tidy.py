@@ -114,12 +114,7 @@ def trial_rows(
         target_index = trial.get("target_index")
         child_index = trial.get("child_index")
         row: dict[str, Any] = {
-            "session": session.id,
-            "group": session.group,
-            "condition": session.condition,
-            "profile": session.profile,
-            "speak_uncertainty": session.speak_uncertainty,
-            "variant": session.variant,
+            **session.identity,
             "trial": trial.get("trial"),
             "problem_trial": trial.get("problem_trial"),
             "target": trial.get("target"),
