@@ -30,7 +30,7 @@ def start(tmp: Path, listener: socket.socket) -> tuple[subprocess.Popen[bytes], 
     began = time.monotonic()
     process = subprocess.Popen(
         [sys.executable, "-m", "kasparctl", "run", "--sim", "--config",
-         str(REPO / "kasparctl" / "demo.toml"), "--state-dir", str(tmp / "state")],
+         str(REPO / "kasparctl" / "sim" / "demo.toml"), "--state-dir", str(tmp / "state")],
         stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
     )
     listener.settimeout(30)

@@ -20,16 +20,16 @@ import time
 from pathlib import Path
 from typing import Any
 
-from kasparctl import simtime
 from kasparctl.config import Config
-from kasparctl.demo import DemoOptions, build, demo_config, run_demo, with_variant
-from kasparctl.game_state import GameState
+from kasparctl.game.session import Session
+from kasparctl.game.state import GameState
+from kasparctl.learning.study_stats import summarise
 from kasparctl.log import configure_logging
-from kasparctl.replicate import replicate
-from kasparctl.session import Session
-from kasparctl.simulate import simulate_study
-from kasparctl.study_stats import summarise
-from kasparctl.teacher import Teacher
+from kasparctl.sim import simtime
+from kasparctl.sim.demo import DemoOptions, build, demo_config, run_demo, with_variant
+from kasparctl.sim.replicate import replicate
+from kasparctl.sim.simulate import simulate_study
+from kasparctl.sim.teacher import Teacher
 
 LATENCY_TARGET_MS = 10.0
 GAMES_TARGET = 50.0

@@ -19,12 +19,12 @@ RUNS = 15
 DAEMON_MODULES = (
     "kasparctl.cli",
     "kasparctl.config",
-    "kasparctl.learner",
-    "kasparctl.phrases",
+    "kasparctl.learning.learner",
+    "kasparctl.game.phrases",
     "kasparctl.log",
-    "kasparctl.session",
-    "kasparctl.game",
-    "kasparctl.daemon",
+    "kasparctl.game.session",
+    "kasparctl.game.machine",
+    "kasparctl.service.daemon",
     "hal",
 )
 

@@ -26,9 +26,9 @@ from evdev import ecodes
 from evdev_pipe import PipeBank
 
 from hal.clock import MonotonicClock
-from hal.gestures import ANSWERS_ONLY, RESEARCHER_GESTURES, GestureNeeds
-from hal.keyfob import Keyfob
-from hal.keyfob_settings import KeyfobSettings
+from hal.keyfob.gestures import ANSWERS_ONLY, RESEARCHER_GESTURES, GestureNeeds
+from hal.keyfob.reader import Keyfob
+from hal.keyfob.settings import KeyfobSettings
 
 PRESS_TARGET_MS = 2.0
 LONG_TARGET_MS = 5.0

@@ -10,7 +10,14 @@ import time
 
 import numpy as np
 
-from kasparctl.learner import LearnerParams, choose, entropy_bits, new_table, softmax, update
+from kasparctl.learning.learner import (
+    LearnerParams,
+    choose,
+    entropy_bits,
+    new_table,
+    softmax,
+    update,
+)
 
 TARGET_US = 20.0
 TRIALS = 20_000

@@ -27,9 +27,9 @@ import msgspec
 
 from kasparctl.cli import main
 from kasparctl.config import SessionPlan
-from kasparctl.demo import DemoOptions, demo_config, run_demo, with_variant
 from kasparctl.log import configure_logging
-from kasparctl.teacher import Teacher
+from kasparctl.sim.demo import DemoOptions, demo_config, run_demo, with_variant
+from kasparctl.sim.teacher import Teacher
 
 TARGET_S = 30.0
 CONDITIONS = (("paper", True), ("paper", False), ("fast", True), ("slow", True))

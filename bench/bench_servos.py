@@ -24,13 +24,13 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 import dynamixel_sdk as sdk  # noqa: E402
 import msgspec  # noqa: E402
 
-from hal import dynamixel1 as dx1  # noqa: E402
-from hal import dynamixel2 as dx2  # noqa: E402
-from hal.bus import SerialBus, wire_time  # noqa: E402
 from hal.clock import MonotonicClock  # noqa: E402
-from hal.joints import Joints  # noqa: E402
-from hal.servo_drivers import Dynamixel1Driver, Dynamixel2Driver  # noqa: E402
-from hal.servo_settings import ServoSettings  # noqa: E402
+from hal.servos import dynamixel1 as dx1  # noqa: E402
+from hal.servos import dynamixel2 as dx2  # noqa: E402
+from hal.servos.bus import SerialBus, wire_time  # noqa: E402
+from hal.servos.drivers import Dynamixel1Driver, Dynamixel2Driver  # noqa: E402
+from hal.servos.joints import Joints  # noqa: E402
+from hal.servos.settings import ServoSettings  # noqa: E402
 
 BAUD = 1_000_000
 IDS = list(range(1, 18))

@@ -1,4 +1,4 @@
-"""1,000,000 pilot problems through the vectorised simulator (kasparctl.sweep).
+"""1,000,000 pilot problems through the vectorised simulator (kasparctl.sim.sweep).
 
 Run on demand: .venv/bin/python bench/bench_sweep.py
 """
@@ -9,8 +9,8 @@ import time
 
 import numpy as np
 
-from kasparctl.study_stats import summarise_table
-from kasparctl.sweep import simulate_pilot_problems
+from kasparctl.learning.study_stats import summarise_table
+from kasparctl.sim.sweep import simulate_pilot_problems
 
 TARGET_S = 10.0
 PROBLEMS = 1_000_000

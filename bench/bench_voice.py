@@ -24,8 +24,8 @@ import time
 import tracemalloc
 from pathlib import Path
 
-from hal.voice import Voice, _spawn, _stop
-from hal.voice_settings import VoiceSettings
+from hal.voice.settings import VoiceSettings
+from hal.voice.speaker import Voice, _spawn, _stop
 
 LINE = "I think the lion is in this bag."  # 8 words, typical of the game
 RUNS = 40

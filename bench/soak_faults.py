@@ -22,10 +22,10 @@ from typing import Any
 import numpy as np
 from soak_rig import EmulatedServos, HangingSink, MonitoredHerkulex
 
-from hal.bus import BusState
-from hal.sim_keyfob import SimKeyfob
-from kasparctl.game import Game
-from kasparctl.session import RECORDS_FILE
+from hal.keyfob.sim import SimKeyfob
+from hal.servos.bus import BusState
+from kasparctl.game.machine import Game
+from kasparctl.game.session import RECORDS_FILE
 
 # Each kind is injected in turn as a game's first fault (so a short soak sees them all),
 # then at random.

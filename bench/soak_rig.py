@@ -5,7 +5,7 @@ the real protocol (so timeouts, corrupt replies and an unplugged adapter go
 through the real bus thread, retries and reconnect), the keyfob is the
 simulated one (it can be unplugged), and the voice is the real queue, timeout
 and recovery code in front of an engine that can hang. The emulated shafts move
-on the game's simulated clock (kasparctl.simtime holds that clock while the bus
+on the game's simulated clock (kasparctl.sim.simtime holds that clock while the bus
 thread waits for a reply), and a monitor checks every goal packet the servos
 receive against the joint's range and speed limit.
 """
@@ -20,12 +20,12 @@ from pathlib import Path
 import msgspec
 from emulators.herkulex import HerkulexEmulator
 
-from hal import herkulex as hx
 from hal.clock import Clock
-from hal.joints import Joints
-from hal.servo_drivers import driver_for
-from hal.servo_settings import JointSettings, ServoSettings
-from hal.sim_voice import speaking_time
+from hal.servos import herkulex as hx
+from hal.servos.drivers import driver_for
+from hal.servos.joints import Joints
+from hal.servos.settings import JointSettings, ServoSettings
+from hal.voice.sim import speaking_time
 
 # A goal may differ from the last by the speed limit over one control step, plus the
 # rounding of degrees to raw units on both goals (a DRS-0101 unit is 0.325 degrees).
@@ -160,7 +160,7 @@ class EmulatedServos(Joints):
 class HangingSink:
     """A voice Sink whose "engine" speaks for as long as the line takes, or hangs when told to.
 
-    hal.voice.Voice in front of it is the robot's own: its queue, utterance timeout,
+    hal.voice.speaker.Voice in front of it is the robot's own: its queue, utterance timeout,
     cancellation and fallback handle the hang.
     """
 

@@ -32,17 +32,17 @@ from soak_rig import (  # noqa: E402
 )
 
 from hal.clock import LoopClock  # noqa: E402
-from hal.voice import Voice  # noqa: E402
-from kasparctl import simtime  # noqa: E402
+from hal.voice.speaker import Voice  # noqa: E402
 from kasparctl.config import Config  # noqa: E402
-from kasparctl.demo import DemoOptions, assemble, demo_config, with_variant  # noqa: E402
+from kasparctl.game.session import RECORDS_FILE, find_unfinished, read_records, write_atomic  # noqa: E402
 from kasparctl.log import configure_logging  # noqa: E402
-from kasparctl.session import RECORDS_FILE, find_unfinished, read_records, write_atomic  # noqa: E402
+from kasparctl.sim import simtime  # noqa: E402
+from kasparctl.sim.demo import DemoOptions, assemble, demo_config, with_variant  # noqa: E402
 
 # A simulated researcher resumes after every fault, and again when the robot refuses
 # (a servo still silent); only after this many tries in one game do they stop it.
 PATIENCE = 40
-# The robot's own health poll (hal.servo_settings' default), not the demo's relaxed one.
+# The robot's own health poll (hal.servos.settings' default), not the demo's relaxed one.
 POLL_INTERVAL_S = 1.0
 # A game takes 5-15 simulated minutes with its faults; one still going after this has
 # stalled. (Far below the demo's 12 hours: each simulated second of a stalled game

@@ -9,12 +9,12 @@ from typing import TextIO
 import msgspec
 
 from hal.clock import Clock
-from hal.input_api import KeyfobInput
-from hal.keyfob_settings import KeyfobSettings
-from hal.servo_api import ServoApi, build_servos
-from hal.servo_settings import ServoSettings
-from hal.voice_api import VoiceOutput
-from hal.voice_settings import VoiceSettings
+from hal.keyfob.api import KeyfobInput
+from hal.keyfob.settings import KeyfobSettings
+from hal.servos.api import ServoApi
+from hal.servos.settings import ServoSettings
+from hal.voice.api import VoiceOutput
+from hal.voice.settings import VoiceSettings
 
 
 @dataclass
@@ -22,6 +22,17 @@ class BuiltHardware:
     servos: ServoApi
     keyfob: KeyfobInput
     voice: VoiceOutput
+
+
+def build_servos(settings: ServoSettings, clock: Clock) -> ServoApi:
+    """The configured backend: the real buses, or the simulated servos."""
+    if settings.backend == "real":
+        from hal.servos.joints import Joints
+
+        return Joints.from_settings(settings, clock)
+    from hal.servos.sim import SimServos
+
+    return SimServos(settings, clock)
 
 
 def build(
@@ -43,19 +54,19 @@ def build(
         servos = msgspec.structs.replace(servos, backend="sim")
     built_servos = build_servos(servos, clock)
     if sim or keyfob.backend == "sim":
-        from hal.sim_keyfob import TerminalKeyfob
+        from hal.keyfob.sim import TerminalKeyfob
 
         built_keyfob: KeyfobInput = TerminalKeyfob(clock, stream=sim_keys or sys.stdin)
     else:
-        from hal.keyfob import Keyfob
+        from hal.keyfob.reader import Keyfob
 
         built_keyfob = Keyfob(keyfob, clock)
     if sim or voice.backend == "sim":
-        from hal.sim_voice import SimVoice
+        from hal.voice.sim import SimVoice
 
         built_voice: VoiceOutput = SimVoice(sim_lines or sys.stderr, clock)
     else:
-        from hal.voice import Voice
+        from hal.voice.speaker import Voice
 
         built_voice = Voice(voice, clock)
     return BuiltHardware(built_servos, built_keyfob, built_voice)

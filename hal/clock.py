@@ -33,7 +33,7 @@ class MonotonicClock:
 
 
 class LoopClock:
-    """The running event loop's clock: real on the robot, simulated under kasparctl.simtime."""
+    """The running event loop's clock: real on the robot, simulated under kasparctl.sim.simtime."""
 
     def now(self) -> float:
         return asyncio.get_running_loop().time()
@@ -46,7 +46,7 @@ class LoopClock:
 def thread_work(loop: asyncio.AbstractEventLoop) -> Iterator[None]:
     """Mark a wait for a thread's real I/O: a simulated clock stands still meanwhile.
 
-    On the robot's loop this does nothing. Under kasparctl.simtime's virtual
+    On the robot's loop this does nothing. Under kasparctl.sim.simtime's virtual
     clock the loop would otherwise jump to its next timer while a bus thread
     waits for a servo's reply, so a 20 ms serial timeout would cost whole
     simulated seconds and an emulated servo would seem to move instantly.

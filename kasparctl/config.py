@@ -16,10 +16,10 @@ from typing import Any, Literal
 
 import msgspec
 
-from hal.keyfob_settings import KeyfobSettings
-from hal.servo_settings import ServoSettings
-from hal.voice_settings import VoiceSettings
-from kasparctl.learner import LearnerError, LearnerParams
+from hal.keyfob.settings import KeyfobSettings
+from hal.servos.settings import ServoSettings
+from hal.voice.settings import VoiceSettings
+from kasparctl.learning.learner import LearnerError, LearnerParams
 
 DEFAULT_CONFIG_PATH = Path("/etc/kaspar/kaspar.toml")
 

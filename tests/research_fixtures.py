@@ -20,12 +20,12 @@ from typing import Any
 import msgspec
 from rig_events import on_event
 
-from hal.servo_api import FaultKind
-from kasparctl import simtime
+from hal.servos.api import FaultKind
 from kasparctl.config import Config, SessionPlan
-from kasparctl.demo import DemoOptions, DemoRig, build, demo_config, with_variant
-from kasparctl.session import RECORDS_FILE, STATE_FILE
-from kasparctl.teacher import Teacher
+from kasparctl.game.session import RECORDS_FILE, STATE_FILE
+from kasparctl.sim import simtime
+from kasparctl.sim.demo import DemoOptions, DemoRig, build, demo_config, with_variant
+from kasparctl.sim.teacher import Teacher
 
 Scenario = Callable[[DemoRig], Coroutine[Any, Any, None]]
 
@@ -145,7 +145,7 @@ def make_study(root: Path) -> Study:
 
 
 def raw_records(session_dir: Path) -> list[dict[str, Any]]:
-    """Records read the plain way, independently of kasparctl.session.read_records."""
+    """Records read the plain way, independently of kasparctl.game.session.read_records."""
     records = []
     for line in (session_dir / RECORDS_FILE).read_text(errors="replace").splitlines():
         try:

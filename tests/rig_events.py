@@ -6,7 +6,7 @@ import asyncio
 from collections.abc import Callable
 from typing import Any
 
-from kasparctl.demo import DemoRig
+from kasparctl.sim.demo import DemoRig
 
 
 def on_event(

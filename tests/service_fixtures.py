@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-DEMO_CONFIG = REPO / "kasparctl" / "demo.toml"
+DEMO_CONFIG = REPO / "kasparctl" / "sim" / "demo.toml"
 
 
 def run_command(state_dir: Path) -> list[str]:

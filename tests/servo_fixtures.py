@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from hal.bus import SerialBus
-from hal.servo_drivers import DRIVERS
+from hal.servos.bus import SerialBus
+from hal.servos.drivers import DRIVERS
 
 # Generous: a busy 2-core CI machine can stall a thread for tens of milliseconds.
 TEST_MARGIN = 0.1
@@ -35,7 +35,7 @@ def servo_settings(safe_action: str = "hold", backend: str = "sim", **overrides)
     """Two buses, an arm of three AX-12s and two HerkuleX head joints."""
     import msgspec
 
-    from hal.servo_settings import BusSettings, JointSettings, ServoSettings
+    from hal.servos.settings import BusSettings, JointSettings, ServoSettings
 
     buses = (
         BusSettings(name="body", port="/dev/kaspar-body", protocol="dynamixel1", baud=1_000_000),

@@ -8,9 +8,9 @@ import pytest
 from emulators.dynamixel import Dynamixel1Emulator
 from servo_fixtures import make_driver
 
-from hal import dynamixel1 as dx1
-from hal.bus import BusState, SerialBus, wire_time
 from hal.errors import BusClosed, PortUnavailable, ServoSilent
+from hal.servos import dynamixel1 as dx1
+from hal.servos.bus import BusState, SerialBus, wire_time
 
 
 @pytest.fixture
@@ -162,7 +162,7 @@ async def test_a_cancellation_that_lands_with_the_reply_still_cancels(ax12, driv
     # Found by the soak: with asyncio.wait_for on Python 3.11, a pause arriving in the
     # same loop turn as a servo's reply was dropped, the game step carried on, and the
     # game waited for ever for that step to end.
-    from hal import bus as bus_module
+    from hal.servos import bus as bus_module
 
     loop = asyncio.get_running_loop()
     reader: asyncio.Task | None = None

@@ -10,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from kasparctl.session import RECORDS_FILE, read_records
+from kasparctl.game.session import RECORDS_FILE, read_records
 
 KILLS_WANTED = 22
 

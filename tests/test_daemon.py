@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 from service_fixtures import NotifyListener, run_command, running_service
 
-from kasparctl.sdnotify import Notifier, watchdog_interval
-from kasparctl.session import RECORDS_FILE, STATE_FILE
+from kasparctl.game.session import RECORDS_FILE, STATE_FILE
+from kasparctl.service.sdnotify import Notifier, watchdog_interval
 
 WATCHDOG_USEC = 600_000  # pings expected every 0.3 s
 
@@ -116,8 +116,8 @@ def test_watchdog_interval_is_half_of_watchdog_usec(monkeypatch: pytest.MonkeyPa
 
 
 def test_next_session_is_the_first_planned_group_not_finished(tmp_path: Path) -> None:
-    from kasparctl.daemon import Daemon, DaemonOptions
-    from kasparctl.session import Session
+    from kasparctl.game.session import Session
+    from kasparctl.service.daemon import Daemon, DaemonOptions
 
     example = Path(__file__).resolve().parents[1] / "systemd" / "kaspar.toml"  # groups A1, A2
     daemon = Daemon(DaemonOptions(str(example), sim=True, state_dir=str(tmp_path)), Notifier(""))

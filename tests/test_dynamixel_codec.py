@@ -10,9 +10,9 @@ from emulators.pty_port import PtyPort
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hal import dynamixel1 as dx1
-from hal import dynamixel2 as dx2
 from hal.errors import CodecError
+from hal.servos import dynamixel1 as dx1
+from hal.servos import dynamixel2 as dx2
 
 
 @pytest.fixture

@@ -7,10 +7,10 @@ import pytest
 from emulators.dynamixel import Dynamixel1Emulator, Dynamixel2Emulator
 from servo_fixtures import eventually, make_driver
 
-from hal import dynamixel1 as dx1
-from hal import dynamixel2 as dx2
 from hal.errors import ServoSilent
-from hal.servo_api import FaultKind
+from hal.servos import dynamixel1 as dx1
+from hal.servos import dynamixel2 as dx2
+from hal.servos.api import FaultKind
 
 
 @pytest.fixture

@@ -20,9 +20,9 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from kasparctl.config import Config, ConfigError, parse_config
-from kasparctl.game_state import GameState, StateError
-from kasparctl.phrases import PhraseBook, PhraseError, parse_phrasebook
-from kasparctl.session import TORN_SUFFIX, read_records
+from kasparctl.game.phrases import PhraseBook, PhraseError, parse_phrasebook
+from kasparctl.game.session import TORN_SUFFIX, read_records
+from kasparctl.game.state import GameState, StateError
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE_CONFIG = (REPO / "systemd" / "kaspar.toml").read_text(encoding="utf-8")
@@ -320,7 +320,7 @@ STATE_KEYS = [
 
 def _valid_state() -> dict[str, Any]:
     from kasparctl.config import GameSettings
-    from kasparctl.learner import LearnerParams
+    from kasparctl.learning.learner import LearnerParams
 
     game = GameSettings()
     return GameState.new(game, LearnerParams(), seed=1).to_plain()

@@ -14,13 +14,13 @@ import msgspec
 import pytest
 from rig_events import on_event
 
-from hal.servo_api import FaultKind
-from kasparctl import simtime
+from hal.servos.api import FaultKind
 from kasparctl.config import Config
-from kasparctl.demo import DemoOptions, DemoResult, DemoRig, build, demo_config, with_variant
-from kasparctl.game import STATES, TRANSITIONS
-from kasparctl.session import RECORDS_FILE
-from kasparctl.teacher import Teacher
+from kasparctl.game.machine import STATES, TRANSITIONS
+from kasparctl.game.session import RECORDS_FILE
+from kasparctl.sim import simtime
+from kasparctl.sim.demo import DemoOptions, DemoResult, DemoRig, build, demo_config, with_variant
+from kasparctl.sim.teacher import Teacher
 
 
 def config_for(variant: str = "names", **game_changes: Any) -> Config:
@@ -380,7 +380,7 @@ def test_a_step_that_swallows_its_cancellation_is_cancelled_again(
 ) -> None:
     # The game waits for a cancelled step to end before it enters the next state; a
     # step that carried on (a library dropping the cancellation) used to hang it there.
-    from kasparctl.game import Game
+    from kasparctl.game.machine import Game
 
     deaf: list[bool] = []
     swallowed: list[bool] = []
@@ -465,7 +465,7 @@ def test_a_session_resumed_before_its_first_step_carries_on_in_the_same_director
     """A crash between opening a session and its first step: the resume must not open another."""
     first, _, _ = play(tmp_path / "whole", config=config_for("pilot"), seed=12)
     plan = records_of(first)[0]["plan"]
-    from kasparctl.session import Session
+    from kasparctl.game.session import Session
 
     crashed = Session.create(tmp_path / "crashed", plan)
     crashed.record("session", 0.0, event="start", plan=plan)

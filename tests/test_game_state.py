@@ -7,8 +7,8 @@ import json
 import pytest
 
 from kasparctl.config import GameSettings
-from kasparctl.game_state import GameState, StateError, restore
-from kasparctl.learner import LearnerParams
+from kasparctl.game.state import GameState, StateError, restore
+from kasparctl.learning.learner import LearnerParams
 
 GAME = GameSettings()  # names variant, 6 toys, 2 greens in a row
 PARAMS = LearnerParams()

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hal.gestures import (
+from hal.keyfob.gestures import (
     ANSWER,
     ANSWER_OR_LONG,
     ANSWERS_ONLY,

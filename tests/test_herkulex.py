@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hal import herkulex as hx
 from hal.errors import CodecError
+from hal.servos import herkulex as hx
 
 
 def test_torque_on_packet_matches_the_manual_layout():
@@ -102,7 +102,7 @@ from emulators.herkulex import HerkulexEmulator  # noqa: E402
 from servo_fixtures import eventually, make_driver  # noqa: E402
 
 from hal.errors import ServoSilent  # noqa: E402
-from hal.servo_api import FaultKind  # noqa: E402
+from hal.servos.api import FaultKind  # noqa: E402
 
 
 @pytest.fixture
@@ -174,8 +174,8 @@ async def test_replies_the_bus_had_to_retry_are_logged_once_per_poll_with_their_
     import structlog
 
     from hal.clock import MonotonicClock
-    from hal.joints import Joints
-    from hal.servo_settings import BusSettings, JointSettings, ServoSettings
+    from hal.servos.joints import Joints
+    from hal.servos.settings import BusSettings, JointSettings, ServoSettings
 
     settings = ServoSettings(
         buses=(BusSettings(name="head", port=str(drs.path), protocol="herkulex", baud=115200),),

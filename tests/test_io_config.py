@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from evdev import ecodes
 
-from hal.keyfob_settings import DEFAULT_DEVICE, KeyfobSettings
+from hal.keyfob.settings import DEFAULT_DEVICE, KeyfobSettings
 from kasparctl.config import ConfigError, parse_config
 
 

@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 from servo_fixtures import FakeClock, eventually, make_driver, servo_settings
 
 from hal.errors import ServoFaultError, UnsafeCommand
-from hal.joints import Joints
-from hal.servo_api import FaultKind, ServoApi
-from hal.sim_servos import SimServos
+from hal.servos.api import FaultKind, ServoApi
+from hal.servos.joints import Joints
+from hal.servos.sim import SimServos
 
 
 async def started(safe_action="hold", **overrides) -> SimServos:
@@ -323,7 +323,7 @@ async def test_an_unplugged_bus_latches_bus_lost_for_its_joints(tmp_path):
 async def test_a_herkulex_overload_is_latched_freed_and_reset_on_clear(tmp_path):
     from emulators.herkulex import HerkulexEmulator
 
-    from hal import herkulex as hx
+    from hal.servos import herkulex as hx
 
     settings = servo_settings(buses=servo_settings().buses[1:], joints=servo_settings().joints[3:])
     with HerkulexEmulator(tmp_path / "ttyHX", ids=[1, 2]) as emulator:

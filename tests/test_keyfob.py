@@ -11,10 +11,10 @@ from evdev import ecodes
 from evdev_pipe import ManualClock, PipeBank, pack
 
 from hal.clock import MonotonicClock
-from hal.gestures import ANSWERS_ONLY, RESEARCHER_GESTURES, Gesture, GestureKind
-from hal.input_api import KeyfobBack, KeyfobLost
-from hal.keyfob import Keyfob
-from hal.keyfob_settings import KeyfobSettings
+from hal.keyfob.api import KeyfobBack, KeyfobLost
+from hal.keyfob.gestures import ANSWERS_ONLY, RESEARCHER_GESTURES, Gesture, GestureKind
+from hal.keyfob.reader import Keyfob
+from hal.keyfob.settings import KeyfobSettings
 
 GREEN, RED, PAUSE = ecodes.KEY_PAGEDOWN, ecodes.KEY_PAGEUP, ecodes.KEY_P
 NODE = "kaspar-keyfob"

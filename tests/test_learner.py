@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from kasparctl.learner import (
+from kasparctl.learning.learner import (
     LearnerError,
     LearnerParams,
     LearnerState,

@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hal import maestro as mo
 from hal.errors import CodecError
+from hal.servos import maestro as mo
 
 
 def test_set_target_splits_into_seven_bit_bytes():

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kasparctl.phrases import (
+from kasparctl.game.phrases import (
     BAND_LINE_PREFIX,
     BAND_SPEC,
     NO_IDEA,

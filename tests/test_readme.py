@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from kasparctl.game_diagram import mermaid
+from kasparctl.game.diagram import mermaid
 
 README = (Path(__file__).resolve().parents[1] / "README.md").read_text()
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from kasparctl.demo import demo_config, with_variant
-from kasparctl.replicate import replicate
-from kasparctl.simulate import simulate_study
-from kasparctl.study_stats import summarise
-from kasparctl.teacher import Teacher
+from kasparctl.learning.study_stats import summarise
+from kasparctl.sim.demo import demo_config, with_variant
+from kasparctl.sim.replicate import replicate
+from kasparctl.sim.simulate import simulate_study
+from kasparctl.sim.teacher import Teacher
 
 
 @pytest.mark.parametrize("teacher", [Teacher(), Teacher(p_wrong_green=0.1, p_wrong_red=0.1)])

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from kasparctl.session import (
+from kasparctl.game.session import (
     RECORDS_FILE,
     STATE_FILE,
     Session,

@@ -9,13 +9,13 @@ import shutil
 
 import pytest
 
-from hal.gestures import ANSWERS_ONLY, Gesture, GestureKind, GestureTimings
-from hal.input_api import KeyfobBack, KeyfobLost
-from hal.sim_keyfob import ScriptedKeyfob, SimKeyfob, TerminalKeyfob, parse_script
-from hal.sim_voice import SimVoice, speaking_time
-from hal.voice import Voice
-from hal.voice_api import SpokenStatus
-from hal.voice_settings import VoiceSettings
+from hal.keyfob.api import KeyfobBack, KeyfobLost
+from hal.keyfob.gestures import ANSWERS_ONLY, Gesture, GestureKind, GestureTimings
+from hal.keyfob.sim import ScriptedKeyfob, SimKeyfob, TerminalKeyfob, parse_script
+from hal.voice.api import SpokenStatus
+from hal.voice.settings import VoiceSettings
+from hal.voice.sim import SimVoice, speaking_time
+from hal.voice.speaker import Voice
 
 WAIT = 10.0
 

@@ -6,8 +6,8 @@ import pytest
 from servo_fixtures import FakeClock, servo_settings
 
 from hal.errors import ServoSilent
-from hal.servo_api import FaultKind
-from hal.sim_servos import SimServos
+from hal.servos.api import FaultKind
+from hal.servos.sim import SimServos
 
 
 @pytest.fixture

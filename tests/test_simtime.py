@@ -8,7 +8,7 @@ import time
 import pytest
 
 from hal.clock import LoopClock
-from kasparctl.simtime import ScaledTimeLoop, run
+from kasparctl.sim.simtime import ScaledTimeLoop, run
 
 
 async def waits_an_hour_and_a_timeout() -> float:

@@ -13,10 +13,9 @@ import numpy as np
 import pytest
 
 from kasparctl.commands import simulate as simulate_command
-from kasparctl.learner import LearnerParams
-from kasparctl.problem import ProblemError, TargetProgress
-from kasparctl.simulate import pilot_game, simulate_group, simulate_study
-from kasparctl.study_stats import (
+from kasparctl.game.problem import ProblemError, TargetProgress
+from kasparctl.learning.learner import LearnerParams
+from kasparctl.learning.study_stats import (
     ProblemRecord,
     ProblemTable,
     TrialRecord,
@@ -24,8 +23,9 @@ from kasparctl.study_stats import (
     summarise_table,
     tabulate,
 )
-from kasparctl.sweep import PilotShape, simulate_pilot_problems, sweep
-from kasparctl.teacher import Teacher, TeacherError
+from kasparctl.sim.simulate import pilot_game, simulate_group, simulate_study
+from kasparctl.sim.sweep import PilotShape, simulate_pilot_problems, sweep
+from kasparctl.sim.teacher import Teacher, TeacherError
 
 PAPER = LearnerParams()
 HONEST = Teacher()

@@ -22,8 +22,8 @@ import soak  # noqa: E402
 from soak_faults import KINDS  # noqa: E402
 from soak_rig import MotionMonitor, Violation  # noqa: E402
 
-from kasparctl.demo import demo_config  # noqa: E402
-from kasparctl.session import RECORDS_FILE  # noqa: E402
+from kasparctl.game.session import RECORDS_FILE  # noqa: E402
+from kasparctl.sim.demo import demo_config  # noqa: E402
 
 
 @pytest.fixture(scope="module")

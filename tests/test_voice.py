@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 import structlog
 
-from hal.voice import PlayerSink, Voice, WavSink
-from hal.voice_api import SpokenStatus
-from hal.voice_settings import VoiceSettings
+from hal.voice.api import SpokenStatus
+from hal.voice.settings import VoiceSettings
+from hal.voice.speaker import PlayerSink, Voice, WavSink
 from kasparctl.log import configure_logging
 
 pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng not installed")

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from hal.clock import MonotonicClock
-from hal.joints import Joints
-from hal.servo_settings import ServoSettings
+from hal.servos.joints import Joints
+from hal.servos.settings import ServoSettings
 from kasparctl.config import DEFAULT_CONFIG_PATH, Config, ConfigError, load_config
+from kasparctl.game.phrases import PhraseError, load_phrasebook
 from kasparctl.log import configure_logging
-from kasparctl.phrases import PhraseError, load_phrasebook
 
 TEST_LINE = "Hello, I am Kaspar. My voice is working."
 
@@ -112,7 +112,7 @@ async def _keyfob(config: Config, speak: bool) -> list[Result]:
     if config.keyfob.backend != "real":
         return [Result("keyfob", True, "simulated (keyfob.backend = 'sim')")]
     from hal.errors import HalError
-    from hal.keyfob import Keyfob
+    from hal.keyfob.reader import Keyfob
 
     try:
         found = Keyfob(config.keyfob, MonotonicClock()).probe()
@@ -128,7 +128,7 @@ async def _voice(config: Config, speak: bool) -> list[Result]:
 
     import msgspec
 
-    from hal.voice import Voice
+    from hal.voice.speaker import Voice
 
     with tempfile.TemporaryDirectory(prefix="kaspar-check-") as scratch:
         settings = config.voice

@@ -16,12 +16,12 @@ from pathlib import Path
 from typing import Any
 
 from kasparctl.config import ConfigError, load_config
-from kasparctl.demo import DemoOptions, DemoStalled, demo_config, run_demo, with_variant
-from kasparctl.learner import LearnerError
+from kasparctl.game.phrases import PhraseError
+from kasparctl.game.session import SessionError
+from kasparctl.learning.learner import LearnerError
 from kasparctl.log import configure_logging
-from kasparctl.phrases import PhraseError
-from kasparctl.session import SessionError
-from kasparctl.teacher import Teacher, TeacherError
+from kasparctl.sim.demo import DemoOptions, DemoStalled, demo_config, run_demo, with_variant
+from kasparctl.sim.teacher import Teacher, TeacherError
 
 
 def register(subparsers: Any) -> None:

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from kasparctl.phrases import PhraseError, load_phrasebook
+from kasparctl.game.phrases import PhraseError, load_phrasebook
 from kasparctl.research.conditions import by_condition
 from kasparctl.research.figures import FiguresUnavailable, draw_all, require_matplotlib
 from kasparctl.research.source import SourceError, add_source_arguments, read_sessions

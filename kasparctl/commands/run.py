@@ -8,8 +8,8 @@ from typing import Any
 
 from kasparctl.commands.check import default_config_path
 from kasparctl.config import ConfigError
-from kasparctl.daemon import DaemonOptions, run_daemon
-from kasparctl.phrases import PhraseError
+from kasparctl.game.phrases import PhraseError
+from kasparctl.service.daemon import DaemonOptions, run_daemon
 
 
 def register(subparsers: Any) -> None:

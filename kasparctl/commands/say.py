@@ -11,9 +11,9 @@ from typing import Any
 
 import msgspec
 
-from hal.voice import Voice, WavSink
-from hal.voice_api import Spoken
-from hal.voice_settings import VoiceSettings
+from hal.voice.api import Spoken
+from hal.voice.settings import VoiceSettings
+from hal.voice.speaker import Voice, WavSink
 from kasparctl.config import DEFAULT_CONFIG_PATH, ConfigError, load_config
 from kasparctl.log import configure_logging
 

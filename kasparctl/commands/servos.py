@@ -8,13 +8,13 @@ import json
 import sys
 from typing import Any
 
-from hal.bus import SerialBus
 from hal.clock import MonotonicClock
 from hal.errors import BusError
-from hal.joints import Joints
-from hal.servo_drivers import DRIVERS
-from hal.servo_settings import BAUD_RATES, model_named
-from hal.sim_servos import SimServos
+from hal.servos.bus import SerialBus
+from hal.servos.drivers import DRIVERS
+from hal.servos.joints import Joints
+from hal.servos.settings import BAUD_RATES, model_named
+from hal.servos.sim import SimServos
 from kasparctl.config import ConfigError, load_config
 from kasparctl.log import configure_logging
 

@@ -26,11 +26,11 @@ from kasparctl.config import (
     ProfileSettings,
     load_config,
 )
-from kasparctl.learner import LearnerError, LearnerParams
-from kasparctl.simulate import SimulationError, playable, simulate_study
-from kasparctl.study_stats import StudyStats, summarise
-from kasparctl.sweep import PilotShape, sweep
-from kasparctl.teacher import Teacher
+from kasparctl.learning.learner import LearnerError, LearnerParams
+from kasparctl.learning.study_stats import StudyStats, summarise
+from kasparctl.sim.simulate import SimulationError, playable, simulate_study
+from kasparctl.sim.sweep import PilotShape, sweep
+from kasparctl.sim.teacher import Teacher
 
 # The pilot study's figures (section IV), shown beside a pilot simulation.
 PAPER = {

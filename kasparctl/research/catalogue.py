@@ -1,6 +1,6 @@
 """Sessions read back from disk: plan, records, and what they add up to.
 
-The records are the truth (see kasparctl.session): a session's status and
+The records are the truth (see kasparctl.game.session): a session's status and
 trial count come from them, not from the state snapshot, which a crash can
 leave one record behind.
 """
@@ -15,8 +15,8 @@ from typing import Any
 
 import msgspec
 
-from kasparctl.session import PLAN_FILE, RECORDS_FILE, read_records, session_dirs
-from kasparctl.session_stats import undone_trials
+from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, read_records, session_dirs
+from kasparctl.learning.session_stats import undone_trials
 
 
 class CatalogueError(Exception):

@@ -12,10 +12,10 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
 
-from kasparctl.learner import LearnerParams
+from kasparctl.learning.learner import LearnerParams
+from kasparctl.learning.session_stats import problems_from_records
+from kasparctl.learning.study_stats import ProblemRecord, StudyStats, summarise
 from kasparctl.research.catalogue import SessionData
-from kasparctl.session_stats import problems_from_records
-from kasparctl.study_stats import ProblemRecord, StudyStats, summarise
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from kasparctl.phrases import Band
+from kasparctl.game.phrases import Band
 from kasparctl.research.conditions import Condition
 
 INSTALL_HINT = "pip install 'kasparctl[report]'"

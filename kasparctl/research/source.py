@@ -15,7 +15,7 @@ from pathlib import Path
 
 from kasparctl.commands.check import default_config_path
 from kasparctl.config import Config, ConfigError, load_config
-from kasparctl.learner import LearnerParams
+from kasparctl.learning.learner import LearnerParams
 from kasparctl.research.catalogue import (
     CatalogueError,
     SessionData,

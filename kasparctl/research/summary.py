@@ -1,6 +1,6 @@
 """The paper's figures per condition, as JSON (for scripts) and Markdown (for people).
 
-The statistics are kasparctl.study_stats' (the simulator's own), so a report
+The statistics are kasparctl.learning.study_stats' (the simulator's own), so a report
 on recorded sessions and `kasparctl simulate` measure the same things. Added
 here only what needs the answer key and the children's turns: how often the
 children's feedback was wrong, and how often each child's was right.

@@ -7,8 +7,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from emulators.base import Axis, Emulator, split_with
-from hal import dynamixel1 as dx1
-from hal import dynamixel2 as dx2
+from hal.servos import dynamixel1 as dx1
+from hal.servos import dynamixel2 as dx2
 
 
 class Dynamixel1Emulator(Emulator):

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from emulators.base import Axis, Emulator, split_with
-from hal import herkulex as hx
+from hal.servos import herkulex as hx
 
 
 class HerkulexEmulator(Emulator):

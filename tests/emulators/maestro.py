@@ -7,7 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from emulators.base import Axis, Emulator
-from hal import maestro as mo
+from hal.servos import maestro as mo
 
 
 class MaestroEmulator(Emulator):

@@ -4,7 +4,7 @@ Many independent pilot problems (one location over all the toys) advance one
 guess per step as rows of arrays, each row with its own alpha and beta, using
 the learner's batch forms. Finished rows are written out and dropped, so each
 step costs only what is still running. It applies the rule of
-kasparctl.problem and the teacher of kasparctl.teacher row-wise; for a single
+kasparctl.game.problem and the teacher of kasparctl.sim.teacher row-wise; for a single
 row it draws the very random numbers the scalar simulator draws, and the tests
 hold the two to the same records and statistics.
 
@@ -21,15 +21,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kasparctl.config import GameSettings
-from kasparctl.learner import (
+from kasparctl.learning.learner import (
     LearnerError,
     LearnerParams,
     choose_batch,
     entropy_bits_batch,
     softmax_batch,
 )
-from kasparctl.study_stats import ProblemTable, StudyStats, summarise_table
-from kasparctl.teacher import Teacher
+from kasparctl.learning.study_stats import ProblemTable, StudyStats, summarise_table
+from kasparctl.sim.teacher import Teacher
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

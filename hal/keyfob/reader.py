@@ -38,9 +38,9 @@ import structlog
 
 from hal.clock import Clock
 from hal.errors import HalError
-from hal.gestures import Gesture, GestureNeeds, GestureRecognizer, GestureTimings
-from hal.input_api import InputEvent, KeyfobBack, KeyfobLost
-from hal.keyfob_settings import KeyfobSettings
+from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
+from hal.keyfob.gestures import Gesture, GestureNeeds, GestureRecognizer, GestureTimings
+from hal.keyfob.settings import KeyfobSettings
 
 log = structlog.get_logger("kaspar.keyfob")
 
@@ -80,7 +80,7 @@ def open_evdev(path: str) -> EvdevDevice:
 
 
 class Keyfob:
-    """The real keyfob; satisfies hal.input_api.KeyfobInput."""
+    """The real keyfob; satisfies hal.keyfob.api.KeyfobInput."""
 
     def __init__(
         self,

@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 
 from hal.clock import Clock
 from hal.errors import ServoSilent
-from hal.joints import Joints
-from hal.servo_api import FaultKind, Health
-from hal.servo_settings import ServoModel, ServoSettings
+from hal.servos.api import FaultKind, Health
+from hal.servos.joints import Joints
+from hal.servos.settings import ServoModel, ServoSettings
 
 
 @dataclass

@@ -48,8 +48,8 @@ import structlog
 
 from hal.clock import Clock, MonotonicClock
 from hal.errors import HalError
-from hal.voice_api import Spoken, SpokenStatus
-from hal.voice_settings import VoiceSettings
+from hal.voice.api import Spoken, SpokenStatus
+from hal.voice.settings import VoiceSettings
 
 log = structlog.get_logger("kaspar.voice")
 
@@ -414,7 +414,7 @@ class _Request:
 
 
 class Voice:
-    """The real voice; satisfies hal.voice_api.VoiceOutput."""
+    """The real voice; satisfies hal.voice.api.VoiceOutput."""
 
     def __init__(
         self,

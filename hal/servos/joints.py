@@ -33,10 +33,10 @@ from hal.errors import (
     ServoSilent,
     UnsafeCommand,
 )
-from hal.servo_api import Fault, FaultKind, JointStatus, Pose, ServoDriver
-from hal.servo_settings import JointSettings, ServoSettings
+from hal.servos.api import Fault, FaultKind, JointStatus, Pose, ServoDriver
+from hal.servos.settings import JointSettings, ServoSettings
 
-log = structlog.get_logger("hal.joints")
+log = structlog.get_logger("hal.servos.joints")
 
 T = TypeVar("T")
 
@@ -105,7 +105,7 @@ class Joints:
 
     @classmethod
     def from_settings(cls, settings: ServoSettings, clock: Clock) -> Joints:
-        from hal.servo_drivers import driver_for
+        from hal.servos.drivers import driver_for
 
         return cls(settings, {bus.name: driver_for(bus) for bus in settings.buses}, clock)
 

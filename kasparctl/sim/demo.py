@@ -19,20 +19,20 @@ import msgspec
 import numpy as np
 
 from hal.clock import LoopClock
-from hal.servo_api import ServoApi
-from hal.sim_keyfob import SimKeyfob, TerminalKeyfob
-from hal.sim_servos import SimServos
-from hal.sim_voice import SimVoice
-from hal.voice_api import VoiceOutput
-from kasparctl import simtime
+from hal.keyfob.sim import SimKeyfob, TerminalKeyfob
+from hal.servos.api import ServoApi
+from hal.servos.sim import SimServos
+from hal.voice.api import VoiceOutput
+from hal.voice.sim import SimVoice
 from kasparctl.config import Config, SessionPlan, parse_config
-from kasparctl.game import Game, Hardware
-from kasparctl.game_state import GameState, restore
-from kasparctl.phrases import PhrasePicker, load_phrasebook
-from kasparctl.session import Session, find_unfinished
-from kasparctl.sim_children import MAX_RESUMES, Hands, SimulatedGroup
-from kasparctl.simulate import draw_answer_key
-from kasparctl.teacher import Teacher
+from kasparctl.game.machine import Game, Hardware
+from kasparctl.game.phrases import PhrasePicker, load_phrasebook
+from kasparctl.game.session import Session, find_unfinished
+from kasparctl.game.state import GameState, restore
+from kasparctl.sim import simtime
+from kasparctl.sim.children import MAX_RESUMES, Hands, SimulatedGroup
+from kasparctl.sim.simulate import draw_answer_key
+from kasparctl.sim.teacher import Teacher
 
 
 def with_variant(config: Config, variant: str) -> Config:
@@ -55,8 +55,8 @@ def with_variant(config: Config, variant: str) -> Config:
 
 def demo_config() -> Config:
     """The demo's built-in robot: Kaspar 3's head, face and pointing arm, simulated."""
-    text = resources.files("kasparctl").joinpath("demo.toml").read_text(encoding="utf-8")
-    return parse_config(text, "kasparctl/demo.toml")
+    text = resources.files("kasparctl.sim").joinpath("demo.toml").read_text(encoding="utf-8")
+    return parse_config(text, "kasparctl/sim/demo.toml")
 
 
 @dataclass

@@ -31,7 +31,7 @@ import structlog
 from hal.clock import thread_work
 from hal.errors import BusClosed, BusTimeout, CodecError, PortUnavailable, RepeatFilter
 
-log = structlog.get_logger("hal.bus")
+log = structlog.get_logger("hal.servos.bus")
 
 T = TypeVar("T")
 

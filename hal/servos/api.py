@@ -1,8 +1,8 @@
 """What the game sees of the servos (ServoApi), and what a bus driver gives the joints layer.
 
 The game speaks in named joints, groups and degrees; it never sees a bus, an
-id or a raw unit. Both the real joints (hal.joints.Joints) and the simulated
-ones (hal.sim_servos.SimServos) implement ServoApi, with the same safety rules.
+id or a raw unit. Both the real joints (hal.servos.joints.Joints) and the simulated
+ones (hal.servos.sim.SimServos) implement ServoApi, with the same safety rules.
 """
 
 from __future__ import annotations
@@ -10,11 +10,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
-
-if TYPE_CHECKING:
-    from hal.clock import Clock
-    from hal.servo_settings import ServoSettings
+from typing import Protocol, runtime_checkable
 
 
 class FaultKind(enum.Enum):
@@ -177,14 +173,3 @@ class ServoDriver(Protocol):
     def retried(self) -> int:
         """Replies retried on this bus so far (corrupt or late, then good); 0 when simulated."""
         ...
-
-
-def build_servos(settings: ServoSettings, clock: Clock) -> ServoApi:
-    """The configured backend: the real buses, or the simulated servos."""
-    if settings.backend == "real":
-        from hal.joints import Joints
-
-        return Joints.from_settings(settings, clock)
-    from hal.sim_servos import SimServos
-
-    return SimServos(settings, clock)

@@ -12,7 +12,7 @@ import enum
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
-from hal.dynamixel1 import DynamixelError
+from hal.servos.dynamixel1 import DynamixelError
 
 __all__ = ["DynamixelError"]
 

@@ -2,8 +2,8 @@
 
 This path calls the learner exactly as the game does (one Q row per target,
 softmax over the candidates, the entropy Kaspar speaks, choose, the answer,
-Eq. 1) and applies the shared rule of kasparctl.problem, so its statistics are
-what the game would show with these teachers. kasparctl.sweep is the fast
+Eq. 1) and applies the shared rule of kasparctl.game.problem, so its statistics are
+what the game would show with these teachers. kasparctl.sim.sweep is the fast
 vectorised twin for parameter sweeps; the tests hold the two together.
 
 Variants (GameSettings.variant):
@@ -24,7 +24,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from kasparctl.config import GameSettings
-from kasparctl.learner import (
+from kasparctl.game.problem import TargetProgress
+from kasparctl.learning.learner import (
     LearnerParams,
     choose,
     entropy_bits,
@@ -32,9 +33,8 @@ from kasparctl.learner import (
     softmax,
     update,
 )
-from kasparctl.problem import TargetProgress
-from kasparctl.study_stats import ProblemRecord, TrialRecord
-from kasparctl.teacher import Teacher
+from kasparctl.learning.study_stats import ProblemRecord, TrialRecord
+from kasparctl.sim.teacher import Teacher
 
 PILOT_LOCATIONS = ("location 1", "location 2", "location 3")
 

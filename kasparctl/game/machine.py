@@ -29,16 +29,16 @@ import structlog
 from transitions.extensions.asyncio import AsyncMachine
 
 from hal.errors import HalError
-from hal.gestures import Gesture, GestureKind, GestureNeeds
-from hal.input_api import KeyfobBack, KeyfobInput, KeyfobLost
-from hal.servo_api import Fault, ServoApi
-from hal.voice_api import Spoken, SpokenStatus, VoiceOutput
+from hal.keyfob.api import KeyfobBack, KeyfobInput, KeyfobLost
+from hal.keyfob.gestures import Gesture, GestureKind, GestureNeeds
+from hal.servos.api import Fault, ServoApi
+from hal.voice.api import Spoken, SpokenStatus, VoiceOutput
 from kasparctl.config import Config, SessionPlan
-from kasparctl.game_state import STEPS, GameState
-from kasparctl.learner import choose, entropy_bits, softmax, update
+from kasparctl.game.phrases import PhrasePicker
+from kasparctl.game.session import Session
+from kasparctl.game.state import STEPS, GameState
+from kasparctl.learning.learner import choose, entropy_bits, softmax, update
 from kasparctl.log import bind_context
-from kasparctl.phrases import PhrasePicker
-from kasparctl.session import Session
 
 log = structlog.get_logger(__name__)
 

@@ -21,10 +21,10 @@ from typing import TextIO
 import structlog
 
 from hal.clock import Clock
-from hal.gestures import GREEN, RED, Gesture, GestureNeeds, GestureRecognizer, GestureTimings
-from hal.input_api import InputEvent, KeyfobBack, KeyfobLost
+from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
+from hal.keyfob.gestures import GREEN, RED, Gesture, GestureNeeds, GestureRecognizer, GestureTimings
 
-log = structlog.get_logger("hal.sim_keyfob")
+log = structlog.get_logger("hal.keyfob.sim")
 
 PRESS_HOLD = 0.1  # a child's short press
 PRESS_GAP = 0.1  # between the two presses of a double
@@ -45,7 +45,7 @@ _ACTION_LIST = ", ".join([*ACTIONS, "command NAME"])
 
 
 class SimKeyfob:
-    """A keyfob whose keys are pressed by `perform`; satisfies hal.input_api.KeyfobInput."""
+    """A keyfob whose keys are pressed by `perform`; satisfies hal.keyfob.api.KeyfobInput."""
 
     def __init__(
         self,

@@ -1,7 +1,7 @@
 """The simulated voice: each line printed with its clock time, for as long as it would take to say.
 
 Optionally it also speaks (or writes WAV files) through a real voice, e.g.
-hal.voice.Voice with engine "espeak-ng", so the demo can be heard.
+hal.voice.speaker.Voice with engine "espeak-ng", so the demo can be heard.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from typing import TextIO
 
 from hal.clock import Clock
-from hal.voice_api import Spoken, SpokenStatus, VoiceOutput
+from hal.voice.api import Spoken, SpokenStatus, VoiceOutput
 
 PAUSE_AFTER_LINE = 0.3
 
@@ -23,7 +23,7 @@ def speaking_time(text: str, rate: int) -> float:
 
 
 class SimVoice:
-    """Satisfies hal.voice_api.VoiceOutput without a sound card."""
+    """Satisfies hal.voice.api.VoiceOutput without a sound card."""
 
     def __init__(
         self,

@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 
 from kasparctl.config import GameSettings
-from kasparctl.learner import PLAIN_DATA_ERRORS, LearnerParams, LearnerState
-from kasparctl.problem import TargetProgress
+from kasparctl.game.problem import TargetProgress
+from kasparctl.learning.learner import PLAIN_DATA_ERRORS, LearnerParams, LearnerState
 
 # The game's steps in order; the pilot variant starts at "guessing".
 STEPS = ("placing", "teaching", "revealing", "guessing", "farewell")

@@ -1,6 +1,6 @@
 """A recorded session as the problems the simulator's statistics work on.
 
-Lets the paper's statistics (kasparctl.study_stats) run on what the game
+Lets the paper's statistics (kasparctl.learning.study_stats) run on what the game
 really recorded, so the demo, the robot and the simulator are measured by the
 same code. An answer taken back with the researcher's undo is not a trial of
 the problem: it is left out here, and stays marked in the records.
@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from kasparctl.learner import LearnerParams, entropy_bits, softmax
-from kasparctl.study_stats import ProblemRecord, TrialRecord
+from kasparctl.learning.learner import LearnerParams, entropy_bits, softmax
+from kasparctl.learning.study_stats import ProblemRecord, TrialRecord
 
 
 def undone_trials(records: Sequence[dict[str, Any]]) -> set[int]:

@@ -12,14 +12,14 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from hal import dynamixel1 as dx1
-from hal import dynamixel2 as dx2
-from hal import herkulex as hx
-from hal import maestro as mo
-from hal.bus import Exchange, Framing, SerialBus
 from hal.errors import BusTimeout, CodecError, PortUnavailable, ServoSilent
-from hal.servo_api import FaultKind, Health
-from hal.servo_settings import BusSettings
+from hal.servos import dynamixel1 as dx1
+from hal.servos import dynamixel2 as dx2
+from hal.servos import herkulex as hx
+from hal.servos import maestro as mo
+from hal.servos.api import FaultKind, Health
+from hal.servos.bus import Exchange, Framing, SerialBus
+from hal.servos.settings import BusSettings
 
 AX12_SPEED_DPS_PER_UNIT = 0.111 * 6  # moving speed unit: 0.111 rpm
 

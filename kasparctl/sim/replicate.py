@@ -2,7 +2,7 @@
 
 Two implementations of one study must agree: `kasparctl simulate` runs the
 learner loop alone, this runs the game on the simulated robot and reads its
-session records back. Both are summarised by kasparctl.study_stats.
+session records back. Both are summarised by kasparctl.learning.study_stats.
 """
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ import tempfile
 from pathlib import Path
 
 from kasparctl.config import Config
-from kasparctl.demo import DemoOptions, run_demo
-from kasparctl.session import RECORDS_FILE, read_records
-from kasparctl.session_stats import problems_from_records
-from kasparctl.study_stats import ProblemRecord, StudyStats, summarise
-from kasparctl.teacher import Teacher
+from kasparctl.game.session import RECORDS_FILE, read_records
+from kasparctl.learning.session_stats import problems_from_records
+from kasparctl.learning.study_stats import ProblemRecord, StudyStats, summarise
+from kasparctl.sim.demo import DemoOptions, run_demo
+from kasparctl.sim.teacher import Teacher
 
 
 def replicate(

@@ -4,7 +4,7 @@ The pilot's children made 3 mistakes in 202 trials, all of them greens for a
 wrong guess; the model lets a simulation add such mistakes, the opposite ones,
 and guesses nobody answers. An unanswered guess counts as a trial (Kaspar
 pointed and spoke) but gives the learner nothing to update, and it breaks a
-streak of greens (see kasparctl.problem).
+streak of greens (see kasparctl.game.problem).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ class Teacher:
         """True for green, False for red, None when nobody answers.
 
         An honest teacher draws nothing, and any other teacher draws exactly two
-        numbers per guess: the vectorised simulator (kasparctl.sweep) follows the
+        numbers per guess: the vectorised simulator (kasparctl.sim.sweep) follows the
         same rule, so the two paths take the same random stream for one problem.
         """
         if self.honest:

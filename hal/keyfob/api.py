@@ -1,8 +1,8 @@
 """What the game sees of the keyfob: one stream of gestures and keyfob-lost/back events.
 
-The real keyfob (hal.keyfob.Keyfob) and its simulated twins
-(hal.sim_keyfob) all satisfy KeyfobInput; the game imports only this module
-and hal.gestures.
+The real keyfob (hal.keyfob.reader.Keyfob) and its simulated twins
+(hal.keyfob.sim) all satisfy KeyfobInput; the game imports only this module
+and hal.keyfob.gestures.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-from hal.gestures import Gesture, GestureNeeds
+from hal.keyfob.gestures import Gesture, GestureNeeds
 
 
 @dataclass(frozen=True, slots=True)

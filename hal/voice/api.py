@@ -1,6 +1,6 @@
 """What the game sees of Kaspar's voice: say, cancel, close.
 
-The real voice (hal.voice.Voice) and the simulated one (hal.sim_voice.SimVoice)
+The real voice (hal.voice.speaker.Voice) and the simulated one (hal.voice.sim.SimVoice)
 both satisfy VoiceOutput. Speech failures are not exceptions: a session must
 go on when the voice fails, so say() returns a Spoken record naming what
 happened, and the game records the ones that are not "finished".

@@ -35,14 +35,14 @@ from hal.build import BuiltHardware, build
 from hal.clock import LoopClock
 from hal.errors import HalError
 from kasparctl.config import Config, SessionPlan, load_config
-from kasparctl.game import Game, Hardware
-from kasparctl.game_state import GameState, restore
+from kasparctl.game.machine import Game, Hardware
+from kasparctl.game.phrases import PhrasePicker, load_phrasebook
+from kasparctl.game.session import PLAN_FILE, Session, find_unfinished, is_finished, session_dirs
+from kasparctl.game.state import GameState, restore
 from kasparctl.log import configure_logging
-from kasparctl.phrases import PhrasePicker, load_phrasebook
-from kasparctl.sdnotify import Notifier, watchdog_interval
-from kasparctl.session import PLAN_FILE, Session, find_unfinished, is_finished, session_dirs
+from kasparctl.service.sdnotify import Notifier, watchdog_interval
 
-log = structlog.get_logger("kasparctl.daemon")
+log = structlog.get_logger("kasparctl.service.daemon")
 
 STATUS_WORDS = {
     "idle": "waiting: long green starts the session",

@@ -14,7 +14,7 @@ _PHRASE_KEY = re.compile(r"[A-Za-z0-9_.-]+")
 class VoiceSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only=True):
     """Engine, voice, rate, volume, timeout, recorded clips and where the sound goes."""
 
-    # "sim": hal.sim_voice prints each line instead of speaking it.
+    # "sim": hal.voice.sim prints each line instead of speaking it.
     backend: Literal["real", "sim"] = "real"
     # espeak-ng as a child process: 2 ms slower to the first sample than pyttsx3
     # (inaudible) but a hung one is killed, and it shares no state with this

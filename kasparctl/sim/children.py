@@ -2,7 +2,7 @@
 
 They follow what the game announces (a question, a request to move the arm,
 a step waiting for the researcher) and answer like the simulator's teachers
-(kasparctl.teacher): they know the right toys, and may press the wrong button
+(kasparctl.sim.teacher): they know the right toys, and may press the wrong button
 or not answer at all; a child who did not answer answers after a prompt. They
 act only through the simulated hardware, as real children would, so the game
 under test is the game on the robot.
@@ -16,9 +16,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from hal.servo_settings import ServoSettings
-from hal.sim_keyfob import SimKeyfob
-from kasparctl.teacher import Teacher
+from hal.keyfob.sim import SimKeyfob
+from hal.servos.settings import ServoSettings
+from kasparctl.sim.teacher import Teacher
 
 Say = Callable[[str], None]
 MAX_RESUMES = 3

@@ -2,7 +2,7 @@
 
 Key codes are evdev names ("KEY_PAGEDOWN") or numbers; `evtest` shows what a
 keyfob sends. Timings are in seconds. Which gestures each button has is the
-game's decision (hal.gestures.GestureNeeds), not the configuration's: the
+game's decision (hal.keyfob.gestures.GestureNeeds), not the configuration's: the
 same keyfob serves games that need fewer gestures, and fewer gestures mean
 faster presses.
 """
@@ -41,7 +41,7 @@ def key_code(key: str | int) -> int:
 class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only=True):
     """The keyfob device, its key map and the gesture timings."""
 
-    # "sim": the scripted or terminal keyfob of hal.sim_keyfob.
+    # "sim": the scripted or terminal keyfob of hal.keyfob.sim.
     backend: Literal["real", "sim"] = "real"
     # Open by path (a udev symlink, /dev/input/by-id/...) or by the device's
     # name as `evtest` lists it; at most one of the two. Neither: DEFAULT_DEVICE.
