@@ -1,0 +1,109 @@
+"""The walls of the house (docs/architecture.md), checked on the import graph.
+
+Each rule is a function of the graph, so the same rules are also shown to fail
+on a graph with a deliberately broken wall.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import pytest
+from import_graph import Edge, cycles, edges, modules
+
+# Rooms of kasparctl, low to high: a room imports only rooms below it. Rooms on the
+# same floor do not import each other.
+KASPARCTL_FLOORS: dict[str, int] = {
+    "kasparctl": 0,
+    "kasparctl.learning": 1,
+    "kasparctl.config": 2,
+    "kasparctl.log": 2,
+    "kasparctl.game": 3,
+    "kasparctl.body": 4,
+    "kasparctl.sim": 5,
+    "kasparctl.service": 5,
+    "kasparctl.research": 5,
+    "kasparctl.view": 5,
+    "kasparctl.commands": 6,
+    "kasparctl.cli": 7,
+    "kasparctl.__main__": 8,
+}
+# What the game (and everything else that is not a factory's caller) may see of hal.
+HAL_INTERFACES = ("hal", "hal.errors", "hal.clock", "hal.keyfob.gestures")
+HAL_DEVICE_ROOMS = ("hal.servos", "hal.keyfob", "hal.voice")
+# Rooms that assemble real or simulated hardware and so may name implementations.
+ASSEMBLERS = ("hal.build", "kasparctl.sim", "kasparctl.service", "kasparctl.commands")
+
+
+def room(module: str) -> str:
+    """The room a module lives in: hal.servos.joints -> hal.servos; kasparctl.config itself."""
+    parts = module.split(".")
+    return ".".join(parts[:2])
+
+
+def _within(module: str, prefixes: Iterable[str]) -> bool:
+    return any(module == prefix or module.startswith(prefix + ".") for prefix in prefixes)
+
+
+def is_interface(module: str) -> bool:
+    """Interfaces and settings: what any room may import of hal."""
+    last = module.rsplit(".", 1)[-1]
+    return module in HAL_INTERFACES or (
+        room(module) in HAL_DEVICE_ROOMS and last in ("api", "settings")
+    ) or module in HAL_DEVICE_ROOMS
+
+
+def wall_breaches(graph: list[Edge]) -> list[str]:
+    """Every import that breaks a rule of the house, as a readable line."""
+    breaches = [f"import cycle: {' <-> '.join(group)}" for group in cycles(graph)]
+    for edge in graph:
+        source, target = edge.source, edge.target
+        if source.startswith("hal") and target.startswith("kasparctl"):
+            breaches.append(f"hal imports the controller: {edge}")
+        if source == "kasparctl.learning.learner":
+            breaches.append(f"the learner imports the project: {edge}")
+        if source.endswith(".api") and not is_interface(target):
+            breaches.append(f"an interface imports an implementation: {edge}")
+        if target.startswith("hal") and not is_interface(target):
+            same_device_room = room(source) == room(target)
+            if not same_device_room and not _within(source, ASSEMBLERS):
+                breaches.append(f"an implementation is imported outside a factory: {edge}")
+        if source.startswith("kasparctl") and target.startswith("kasparctl"):
+            source_room, target_room = room(source), room(target)
+            if source_room == target_room:
+                continue
+            floor_of_source = KASPARCTL_FLOORS.get(source_room)
+            floor_of_target = KASPARCTL_FLOORS.get(target_room)
+            if floor_of_source is None or floor_of_target is None:
+                breaches.append(f"a room not in the plan of the house: {edge}")
+            elif floor_of_target >= floor_of_source:
+                breaches.append(f"a room imports one on its own floor or above: {edge}")
+    return breaches
+
+
+def test_the_house_has_no_cycles_and_every_wall_holds() -> None:
+    graph = edges()
+    assert len(graph) > 100, "the import graph was not read"
+    assert wall_breaches(graph) == []
+
+
+def test_every_room_of_the_controller_is_on_the_plan() -> None:
+    rooms = {room(name) for name in modules() if name.startswith("kasparctl")}
+    assert rooms <= set(KASPARCTL_FLOORS), rooms - set(KASPARCTL_FLOORS)
+
+
+@pytest.mark.parametrize(
+    ("extra", "expected"),
+    [
+        (Edge("hal.servos.api", "hal.servos.joints", 1), "import cycle"),
+        (Edge("hal.servos.joints", "kasparctl.config", 1), "hal imports the controller"),
+        (Edge("kasparctl.learning.learner", "kasparctl.config", 1), "the learner imports"),
+        (Edge("hal.voice.api", "hal.voice.speaker", 1), "an interface imports an implementation"),
+        (Edge("kasparctl.game.machine", "hal.servos.joints", 1), "outside a factory"),
+        (Edge("kasparctl.game.machine", "kasparctl.sim.demo", 1), "its own floor or above"),
+        (Edge("kasparctl.research.tidy", "kasparctl.sim.demo", 1), "its own floor or above"),
+    ],
+)
+def test_each_rule_fails_on_a_broken_wall(extra: Edge, expected: str) -> None:
+    breaches = wall_breaches([*edges(), extra])
+    assert any(expected in line and str(extra.source) in line for line in breaches), breaches
