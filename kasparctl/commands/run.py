@@ -6,8 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from kasparctl.commands.check import default_config_path
-from kasparctl.config import ConfigError
+from kasparctl.config import ConfigError, default_config_path
 from kasparctl.game.phrases import PhraseError
 from kasparctl.service.daemon import DaemonOptions, run_daemon
 
