@@ -441,6 +441,10 @@ def _describe(value: Any, field_type: Any) -> str | None:
     return str(value)
 
 
+# Raises the ConfigError for a key and a message.
+_Fail = typing.Callable[[str, str], typing.NoReturn]
+
+
 def _validate(config: Config, source: str) -> None:
     """Rules that span several keys, table by table; each names the key that is wrong.
 
@@ -454,9 +458,6 @@ def _validate(config: Config, source: str) -> None:
     _check_game(config.game, fail)
     _check_game_controls(config.game, fail)
     _check_sessions(config, fail)
-
-
-_Fail = typing.Callable[[str, str], typing.NoReturn]
 
 
 def _check_learner(learner: LearnerSettings, fail: _Fail) -> None:
