@@ -29,6 +29,7 @@ COMMAND_MODULES = (
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The parser of every subcommand, each registered by its module."""
     parser = argparse.ArgumentParser(
         prog="kasparctl", description="Controller of the Kaspar robot and its teaching game."
     )
@@ -40,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one subcommand and return its exit code (130 after Ctrl-C)."""
     arguments = build_parser().parse_args(argv)
     try:
         return int(arguments.run(arguments))

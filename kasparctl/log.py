@@ -26,6 +26,7 @@ def configure_logging(
     output_format: Literal["auto", "json", "console"] = "auto",
     stream: TextIO | None = None,
 ) -> None:
+    """Send the process's structlog events to `stream` (stdout) at `level` and above."""
     stream = stream or sys.stdout
     use_json = output_format == "json" or (output_format == "auto" and not stream.isatty())
     renderer: structlog.typing.Processor = (
@@ -55,6 +56,7 @@ def bind_context(**context: object) -> None:
 
 
 def clear_context(*keys: str) -> None:
+    """Unbind these context keys, or every one when none is named."""
     if keys:
         structlog.contextvars.unbind_contextvars(*keys)
     else:

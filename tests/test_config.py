@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
+import msgspec
 import pytest
 
 from kasparctl.cli import main
-from kasparctl.config import Config, ConfigError, load_config, parse_config
+from kasparctl.config import Config, ConfigError, Name, _Limits, load_config, parse_config
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "systemd" / "kaspar.toml"
@@ -94,7 +96,15 @@ def test_relative_paths_are_relative_to_the_file(tmp_path: Path) -> None:
         ('[game]\ncommands = { "long green" = "next", "both" = "stop" }', "kaspar.toml: game.commands: expected a gesture for 'pause': a session cannot be run without it"),
         ('[game]\nvariant = "pilot"\nlocations = ["box", "shelf"]\n[game.poses.box]\nhead_yaw = 10.0', "kaspar.toml: game.poses: expected one pose per location (box, shelf), found box"),
         ("[game.poses.box]\nhead_yaw = 10.0", "kaspar.toml: game.poses: only the pilot variant has configured poses"),
-        ("[game]\nprompt_after_s = []", "kaspar.toml: game.prompt_after_s: expected 1 or more delays of 0.5 to 600 s, found []"),
+        ("[game]\nprompt_after_s = []", "kaspar.toml: game.prompt_after_s: expected at least 1 delay, found 0"),
+        ("[game]\nprompt_after_s = [8.0, 0.1]", "kaspar.toml: game.prompt_after_s[1]: expected 0.5 to 600 s, found 0.1"),
+        ("[game]\nprompt_after_s = [nan]", "kaspar.toml: game.prompt_after_s[0]: expected 0.5 to 600 s, found nan"),
+        ("[game]\nextra_press_gap_s = 20", "kaspar.toml: game.extra_press_gap_s: expected 0 to 10 s, found 20.0"),
+        ("[game]\nextra_press_gap_s = inf", "kaspar.toml: game.extra_press_gap_s: expected 0 to 10 s, found inf"),
+        ("[game]\nchildren_per_group = 0", "kaspar.toml: game.children_per_group: expected 1 to 6, found 0"),
+        ('[game]\nlocations = ["box", ""]', "kaspar.toml: game.locations[1]: expected a name, found an empty string"),
+        ("[[sessions]]\ngroup = 'A'\nchildren = ['Sam', '\t']", "kaspar.toml: sessions[0].children[1]: expected a name, found an empty string"),
+        ("[[sessions]]\ngroup = 'A'\ngroup_size = 0", "kaspar.toml: sessions[0].group_size: expected 1 to 6, found 0"),
         ("[game]\nextra_press_gap_s = -1.0", "kaspar.toml: game.extra_press_gap_s: expected 0 to 10 s, found -1.0"),
     ],
 )
@@ -130,3 +140,35 @@ def test_check_command_exit_codes(tmp_path: Path, capsys: pytest.CaptureFixture[
     bad.write_text("[game]\nvariant = 'maze'\n")
     assert main(["check", "--config", str(bad)]) == 1
     assert f"{bad}: game.variant: expected one of" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("meta", "range_words", "length_words"),
+    [
+        (msgspec.Meta(ge=1, le=6), "1 to 6", None),
+        (msgspec.Meta(ge=0.0, le=10.0, extra={"unit": "s"}), "0 to 10 s", None),
+        (msgspec.Meta(gt=0.0, le=1.0), "> 0 and <= 1", None),
+        (msgspec.Meta(lt=0.25), "< 0.25", None),
+        (msgspec.Meta(min_length=2, extra={"item": "name"}), None, "at least 2 names"),
+        (msgspec.Meta(min_length=1, max_length=3), None, "1 to 3 items"),
+        (msgspec.Meta(min_length=1, max_length=1, extra={"item": "delay"}), None, "exactly 1 delay"),
+        (msgspec.Meta(max_length=1), None, "at most 1 item"),
+    ],
+)
+def test_field_limits_are_worded_like_the_hand_written_messages(meta, range_words, length_words) -> None:
+    limits = _Limits.of(Annotated[tuple[float, ...], meta])
+    if range_words is not None:
+        assert limits.value(pattern=False) == range_words
+    if length_words is not None:
+        assert limits.length() == length_words
+
+
+def test_a_text_limit_without_words_names_its_pattern() -> None:
+    limits = _Limits.of(Annotated[str, msgspec.Meta(pattern="^[a-z]+$", min_length=2)])
+    assert limits.value(pattern=True) == "text matching '^[a-z]+$'"
+    assert limits.length() == "at least 2 characters"
+
+
+def test_nested_limits_merge_outermost_last() -> None:
+    limits = _Limits.of(Annotated[Name, msgspec.Meta(min_length=3)])
+    assert (limits.expected, limits.pattern, limits.min_length) == ("a name", r"\S", 3)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -18,15 +17,11 @@ from typing import Any
 from hal.clock import MonotonicClock
 from hal.servos.joints import Joints
 from hal.servos.settings import ServoSettings
-from kasparctl.config import DEFAULT_CONFIG_PATH, Config, ConfigError, load_config
+from kasparctl.config import Config, ConfigError, default_config_path, load_config
 from kasparctl.game.phrases import PhraseError, load_phrasebook
 from kasparctl.log import configure_logging
 
 TEST_LINE = "Hello, I am Kaspar. My voice is working."
-
-
-def default_config_path() -> str:
-    return os.environ.get("KASPAR_CONFIG", str(DEFAULT_CONFIG_PATH))
 
 
 @dataclass(frozen=True, slots=True)

@@ -54,6 +54,7 @@ STEPS = (
 
 
 def register(subparsers: Any) -> None:
+    """Add `install --print` to the command line."""
     parser = subparsers.add_parser("install", help="print the commands that install the service")
     parser.add_argument(
         "--print",
@@ -66,6 +67,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(arguments: argparse.Namespace) -> int:
+    """Print the numbered install steps; nothing is run."""
     del arguments
     out = sys.stdout
     out.write("# Install kasparctl on a fresh robot. Run from a checkout of kasparctl.\n")

@@ -6,13 +6,13 @@ import argparse
 import sys
 from typing import Any
 
-from kasparctl.commands.check import default_config_path
-from kasparctl.config import ConfigError
+from kasparctl.config import ConfigError, default_config_path
 from kasparctl.game.phrases import PhraseError
 from kasparctl.service.daemon import DaemonOptions, run_daemon
 
 
 def register(subparsers: Any) -> None:
+    """Add `run` and its options to the command line."""
     parser = subparsers.add_parser("run", help="run the controller (what systemd starts)")
     parser.add_argument(
         "--config",
@@ -27,6 +27,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(arguments: argparse.Namespace) -> int:
+    """Run the daemon until it is stopped; 1 when the configuration or phrases are unusable."""
     options = DaemonOptions(
         config_path=arguments.config or default_config_path(),
         sim=arguments.sim,

@@ -11,13 +11,13 @@ import argparse
 import dataclasses
 import json
 import math
+import secrets
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
 import msgspec
-import numpy as np
 
 from kasparctl.config import (
     BUILTIN_PROFILES,
@@ -54,6 +54,7 @@ MAX_SWEEP_VALUES = 1000
 
 
 def register(subparsers: Any) -> None:
+    """Add `simulate` and its options to the command line."""
     parser = subparsers.add_parser(
         "simulate",
         help="simulate groups of children teaching Kaspar (the pilot study), or sweep the learner",
@@ -134,6 +135,7 @@ class UsageError(Exception):
 
 
 def run(arguments: argparse.Namespace) -> int:
+    """Simulate or sweep, print the statistics (JSON with --json); 1 on a bad option."""
     try:
         game, profiles, default_profile, config_seed = _settings(arguments.config)
         params, profile_name = _params(arguments, profiles, default_profile)
@@ -146,8 +148,9 @@ def run(arguments: argparse.Namespace) -> int:
         return 1
     seed = arguments.seed if arguments.seed is not None else config_seed
     if seed is None:
-        # Drawn here and printed, so any run can be repeated.
-        seed = int(np.random.SeedSequence().entropy % (1 << 63))
+        # Drawn here and printed, so any run can be repeated; from the OS's entropy,
+        # as numpy's own SeedSequence() draws it.
+        seed = secrets.randbits(63)
     context = {
         "variant": game.variant,
         "groups": arguments.groups,
@@ -374,7 +377,7 @@ def _progress(groups: int) -> Iterator[Callable[[int], None] | None]:
         yield None
         return
     try:
-        from tqdm import tqdm
+        from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type hints
     except ImportError:
         yield None
         return

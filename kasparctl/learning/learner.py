@@ -32,6 +32,7 @@ class LearnerError(ValueError):
     """
 
     def __init__(self, message: str, key: str = "") -> None:
+        """The message says what is wrong; `key` is empty when no one parameter is."""
         super().__init__(message)
         self.key = key
 
@@ -53,6 +54,7 @@ class LearnerParams:
     initial_q: float = 0.0
 
     def __post_init__(self) -> None:
+        """Refuse parameters the learner cannot use, naming the one at fault."""
         for name in ("alpha", "beta", "gamma", "reward_green", "reward_red", "initial_q"):
             value = getattr(self, name)
             if not math.isfinite(value):
@@ -65,10 +67,12 @@ class LearnerParams:
             raise LearnerError(f"expected a number in [0, 1), found {self.gamma!r}", "gamma")
 
     def reward(self, green: bool) -> float:
+        """The reward r of Eq. 1 for a green (right) or red (wrong) press."""
         return self.reward_green if green else self.reward_red
 
 
 def new_table(n_states: int, n_actions: int, params: LearnerParams) -> FloatArray:
+    """A Q table of states x actions, every value the initial Q."""
     if n_states < 1 or n_actions < 1:
         raise LearnerError(f"a Q table needs at least 1x1, asked for {n_states}x{n_actions}")
     return np.full((n_states, n_actions), params.initial_q, dtype=np.float64)
@@ -96,7 +100,8 @@ def softmax(q_row: FloatArray, beta: float, candidates: BoolArray | None = None)
         best = max(itertools.compress(values, flags))
     if beta == 0.0:
         uniform = np.ones(q.shape) if allowed is None else allowed.astype(np.float64)
-        return uniform / uniform.sum()
+        uniform_probabilities: FloatArray = uniform / uniform.sum()
+        return uniform_probabilities
     if beta * (max(values) - min(values)) <= _SAFE_EXPONENT:
         weights = np.exp(beta * (q - best))
     else:
@@ -105,7 +110,8 @@ def softmax(q_row: FloatArray, beta: float, candidates: BoolArray | None = None)
             weights = np.exp(beta * shifted)
     if allowed is not None:
         weights = weights * allowed  # exactly 0 for a non-candidate, unchanged otherwise
-    return weights / weights.sum()
+    probabilities: FloatArray = weights / weights.sum()
+    return probabilities
 
 
 # Below this, exp(beta * (q - best)) can neither overflow nor warn for any entry.
@@ -114,7 +120,8 @@ _SAFE_EXPONENT = 700.0
 
 def entropy_bits(probabilities: FloatArray) -> float:
     """Eq. 3 in bits; zero probabilities (non-candidates) contribute nothing."""
-    total = -sum(p * math.log2(p) for p in probabilities.tolist() if p > 0.0)
+    values: list[float] = probabilities.tolist()
+    total = -sum(p * math.log2(p) for p in values if p > 0.0)
     return max(0.0, total)
 
 
@@ -163,21 +170,26 @@ def softmax_batch(
         # beta 0 is uniform over the candidates; 0 * -inf (an overflowed spread) is NaN.
         scaled = np.where(beta[:, None] == 0.0, 0.0, beta[:, None] * shifted)
         weights = np.exp(np.where(allowed, scaled, -np.inf))
-    return weights / weights.sum(axis=1, keepdims=True)
+    probabilities: FloatArray = weights / weights.sum(axis=1, keepdims=True)
+    return probabilities
 
 
 def entropy_bits_batch(probabilities: FloatArray) -> FloatArray:
+    """Eq. 3 in bits for each row of probabilities."""
     with np.errstate(divide="ignore", invalid="ignore"):
         terms = np.where(probabilities > 0.0, probabilities * np.log2(probabilities), 0.0)
-    return np.maximum(0.0, -terms.sum(axis=1))
+    entropies: FloatArray = np.maximum(0.0, -terms.sum(axis=1))
+    return entropies
 
 
 def choose_batch(probabilities: FloatArray, rng: np.random.Generator) -> NDArray[np.intp]:
+    """Draw one action per row; an action of probability 0 is never drawn."""
     cumulative = np.cumsum(probabilities, axis=1)
     draws = rng.random(len(probabilities))[:, None] * cumulative[:, -1:]
     index = (cumulative <= draws).sum(axis=1)
     last_possible = probabilities.shape[1] - 1 - np.argmax(probabilities[:, ::-1] > 0.0, axis=1)
-    return np.minimum(index, last_possible)
+    chosen: NDArray[np.intp] = np.minimum(index, last_possible)
+    return chosen
 
 
 # What numpy and the standard library raise for plain data of the wrong shape.
@@ -207,14 +219,17 @@ class LearnerState:
     def fresh(
         cls, n_states: int, n_actions: int, params: LearnerParams, seed: int | None
     ) -> LearnerState:
+        """A new table at the initial Q and a generator seeded with `seed` (None: fresh entropy)."""
         return cls(new_table(n_states, n_actions, params), np.random.default_rng(seed))
 
     def to_plain(self) -> dict[str, Any]:
+        """The table and the generator's exact state as JSON-ready data."""
         # Python's float repr round-trips exactly, so JSON keeps every bit of Q.
         return {"q": self.table.tolist(), "rng": self.rng.bit_generator.state}
 
     @classmethod
     def from_plain(cls, data: dict[str, Any]) -> LearnerState:
+        """The state `to_plain` wrote; LearnerError for anything else."""
         try:
             table = np.array(data["q"], dtype=np.float64)
             generator_state = data["rng"]

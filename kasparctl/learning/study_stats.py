@@ -35,6 +35,8 @@ from numpy.typing import NDArray
 
 
 class TrialRecord(msgspec.Struct, frozen=True, gc=False):
+    """One guess of a problem: the label chosen, the feedback and the entropy before it."""
+
     choice: int
     # True green, False red, None unanswered.
     feedback: bool | None
@@ -45,6 +47,8 @@ class TrialRecord(msgspec.Struct, frozen=True, gc=False):
 
 
 class ProblemRecord(msgspec.Struct, frozen=True):
+    """One problem (a target of a group) from its first guess until learned or given up."""
+
     group: int
     target: int
     answer: int | None
@@ -80,6 +84,8 @@ class ProblemTable:
 
 
 class StudyStats(msgspec.Struct, frozen=True):
+    """The paper's statistics over a set of problems; None where nothing was counted."""
+
     problems: int
     problems_learned: int
     problems_given_up: int
@@ -105,6 +111,7 @@ class StudyStats(msgspec.Struct, frozen=True):
 
 
 def count_perseverative_and_win_shift(trials: Sequence[TrialRecord]) -> tuple[int, int]:
+    """Perseverative errors and win-shifts within one problem's trials."""
     perseverative = win_shift = 0
     for previous, current in itertools.pairwise(trials):
         if previous.feedback is False and current.choice == previous.choice:
@@ -152,10 +159,12 @@ def tabulate(problems: Sequence[ProblemRecord]) -> ProblemTable:
 
 
 def summarise(problems: Sequence[ProblemRecord]) -> StudyStats:
+    """The statistics of trial records."""
     return summarise_table(tabulate(problems))
 
 
 def summarise_table(table: ProblemTable) -> StudyStats:
+    """The statistics of per-problem columns (the vectorised simulator's form)."""
     learned = table.learned
     trials_learned = table.trials[learned]
     trials_total = int(table.trials.sum())

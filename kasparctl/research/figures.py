@@ -12,7 +12,7 @@ values share a scale, one panel per condition for the heat maps.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,20 +44,24 @@ def require_matplotlib() -> None:
 
 @dataclass
 class Drawn:
+    """The figures a report drew, by name, and those it left out."""
+
     names: list[str] = field(default_factory=list)
     # Figures left out and why ("no answer key"), for the summary.
     notes: list[str] = field(default_factory=list)
 
 
 def draw_all(conditions: Sequence[Condition], bands: Sequence[Band], out: Path) -> Drawn:
+    """Draw every figure the conditions allow into `out`, as PNG and SVG."""
     require_matplotlib()
     drawn = Drawn()
-    for name, draw in (
-        ("entropy_by_trial", lambda: entropy_by_trial(conditions, bands)),
-        ("final_q", lambda: final_q(conditions)),
-        ("trials_to_learn", lambda: trials_to_learn(conditions)),
-        ("feedback_by_child", lambda: feedback_by_child(conditions)),
-    ):
+    figures: dict[str, Callable[[], tuple[Any, str]]] = {
+        "entropy_by_trial": lambda: entropy_by_trial(conditions, bands),
+        "final_q": lambda: final_q(conditions),
+        "trials_to_learn": lambda: trials_to_learn(conditions),
+        "feedback_by_child": lambda: feedback_by_child(conditions),
+    }
+    for name, draw in figures.items():
         figure, note = draw()
         if figure is None:
             drawn.notes.append(f"{name}: not drawn, {note}")
@@ -175,9 +179,9 @@ def final_q(conditions: Sequence[Condition]) -> tuple[Any, str]:
     limit = max(float(np.nanmax(np.abs(m))) for m in matrices) or 1.0
     # At most four panels a row, so eight conditions stay readable on a page.
     columns = min(len(panels), PANELS_PER_ROW)
-    rows = math.ceil(len(panels) / columns)
-    figure = _figure(1.0 + 4.2 * columns, 0.4 + 4.0 * rows)
-    grid = figure.subplots(rows, columns, squeeze=False).ravel()
+    panel_rows = math.ceil(len(panels) / columns)
+    figure = _figure(1.0 + 4.2 * columns, 0.4 + 4.0 * panel_rows)
+    grid = figure.subplots(panel_rows, columns, squeeze=False).ravel()
     for unused in grid[len(panels) :]:
         unused.set_axis_off()
     image = None
@@ -240,14 +244,14 @@ def feedback_by_child(conditions: Sequence[Condition]) -> tuple[Any, str]:
     """Share of each child's answers that agreed with the answer key, per condition."""
     tallies: list[dict[int, tuple[int, int]]] = []
     for condition in conditions:
-        tally: dict[int, list[int]] = {}
+        counting: dict[int, list[int]] = {}
         for trial in condition.trials:
             if trial.get("feedback_right") is None:
                 continue
-            entry = tally.setdefault(int(trial["child_index"]) + 1, [0, 0])
+            entry = counting.setdefault(int(trial["child_index"]) + 1, [0, 0])
             entry[0] += bool(trial["feedback_right"])
             entry[1] += 1
-        tallies.append({child: (right, total) for child, (right, total) in tally.items()})
+        tallies.append({child: (right, total) for child, (right, total) in counting.items()})
     if not any(tallies):
         return None, "no session has an answer key"
     children = sorted({child for tally in tallies for child in tally})

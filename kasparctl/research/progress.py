@@ -19,12 +19,13 @@ MINIMUM_ITEMS = 20
 def progress(
     items: Iterable[T], what: str, unit: str = "item", stream: TextIO | None = None
 ) -> Iterator[T]:
+    """The items, with a bar on `stream` (stderr) when it is a terminal and they are many."""
     stream = stream or sys.stderr
     total = len(items) if isinstance(items, Sized) else None
     if not stream.isatty() or (total is not None and total < MINIMUM_ITEMS):
         return iter(items)
     try:
-        from tqdm import tqdm
+        from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type hints
     except ImportError:
         return iter(items)
     return iter(tqdm(items, desc=what, total=total, unit=unit, file=stream, leave=False))

@@ -13,8 +13,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from kasparctl.commands.check import default_config_path
-from kasparctl.config import Config, ConfigError, load_config
+from kasparctl.config import Config, ConfigError, default_config_path, load_config
 from kasparctl.learning.learner import LearnerParams
 from kasparctl.research.catalogue import (
     CatalogueError,

@@ -59,6 +59,7 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     """The clock advances only by jumping to the next timer when the loop is idle."""
 
     def __init__(self) -> None:
+        """A loop whose clock starts at 0 and stands still while anything is ready."""
         selector = _JumpingSelector()
         super().__init__(selector)
         self._jumping = selector
@@ -66,6 +67,7 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
         selector.on_idle = self._advance
 
     def time(self) -> float:
+        """Seconds of simulated time since the loop was made."""
         return self._virtual_now
 
     @contextlib.contextmanager
@@ -85,6 +87,7 @@ class ScaledTimeLoop(asyncio.SelectorEventLoop):
     """The clock runs `speed` times faster than the wall clock."""
 
     def __init__(self, speed: float) -> None:
+        """A loop `speed` (> 0) times faster than real time; ValueError otherwise."""
         selector = _JumpingSelector()
         super().__init__(selector)
         if not speed > 0.0:
@@ -96,6 +99,7 @@ class ScaledTimeLoop(asyncio.SelectorEventLoop):
         selector.on_idle = self._sleep_scaled
 
     def time(self) -> float:
+        """Scaled seconds since the loop was made."""
         return (time.monotonic() - self._start) * self._speed + self._skipped
 
     def _sleep_scaled(self, seconds: float) -> None:

@@ -51,6 +51,7 @@ class PilotShape:
 
     @classmethod
     def from_game(cls, game: GameSettings) -> PilotShape:
+        """The shape of the game's problems (3 per group without locations, as the pilot)."""
         return cls(
             n_toys=len(game.toys),
             correct_answers_to_learn=game.correct_answers_to_learn,
@@ -133,18 +134,19 @@ def simulate_pilot_problems(
     for index in range(n_settings):
         mine = setting == index
         out = {key: merged[key][mine] for key in _Chunk.OUTPUTS} if merged else _empty_outputs()
+        learned = out["learned"].astype(np.int64)
         tables.append(
             ProblemTable(
                 trials=out["trials"].astype(np.int64),
-                learned=out["learned"] >= 0,
-                learned_wrong=(out["learned"] >= 0) & (out["learned"] != out["answer"]),
+                learned=learned >= 0,
+                learned_wrong=(learned >= 0) & (learned != out["answer"]),
                 answer_known=np.ones(len(out["trials"]), dtype=bool),
                 first_correct=out["first_correct"].astype(bool),
                 perseverative=out["perseverative"].astype(np.int64),
                 win_shift=out["win_shift"].astype(np.int64),
-                initial_entropy=out["initial_entropy"],
-                final_entropy=out["final_entropy"],
-                final_entropy_after=out["final_entropy_after"],
+                initial_entropy=out["initial_entropy"].astype(np.float64),
+                final_entropy=out["final_entropy"].astype(np.float64),
+                final_entropy_after=out["final_entropy_after"].astype(np.float64),
                 entropy_sum_by_trial=entropy_sum[index],
                 entropy_count_by_trial=entropy_count[index],
             )
@@ -252,7 +254,7 @@ class _Chunk:
             if params.gamma != 0.0:
                 # s_{t+1} as in the scalar simulator: this row until it is done,
                 # then the group's next (untouched) row, or nothing after the last.
-                next_max = np.where(
+                next_max: FloatArray | float = np.where(
                     done[answered],
                     np.where(self.last_in_group[answered], 0.0, params.initial_q),
                     self.q[rows].max(axis=1),

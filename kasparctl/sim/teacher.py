@@ -19,17 +19,21 @@ class TeacherError(ValueError):
     """A teacher probability outside [0, 1]; `key` names it."""
 
     def __init__(self, message: str, key: str) -> None:
+        """The message says what is wrong; `key` names the probability."""
         super().__init__(message)
         self.key = key
 
 
 @dataclass(frozen=True, slots=True)
 class Teacher:
+    """How often the children give a wrong green, a wrong red, or no answer."""
+
     p_wrong_green: float = 0.0
     p_wrong_red: float = 0.0
     p_no_answer: float = 0.0
 
     def __post_init__(self) -> None:
+        """Refuse a probability outside [0, 1], naming it."""
         for name in ("p_wrong_green", "p_wrong_red", "p_no_answer"):
             value = getattr(self, name)
             if not (math.isfinite(value) and 0.0 <= value <= 1.0):
@@ -37,6 +41,7 @@ class Teacher:
 
     @property
     def honest(self) -> bool:
+        """Every guess answered, and answered right."""
         return self.p_wrong_green == 0.0 and self.p_wrong_red == 0.0 and self.p_no_answer == 0.0
 
     def answer(self, correct: bool, rng: np.random.Generator) -> bool | None:
