@@ -100,6 +100,7 @@ class NotifyListener:
         raise AssertionError(f"{field} never arrived within {seconds} s; last: {recent}")
 
     def close(self) -> None:
+        """Closes the socket and removes its path, so the next run can bind it again."""
         self.socket.close()
         with contextlib.suppress(FileNotFoundError):
             self.path.unlink()

@@ -98,6 +98,7 @@ class RecordedNotifier(Notifier):
         self.sent: list[tuple[float, tuple[str, ...]]] = []
 
     def notify(self, *fields: str) -> bool:
+        """Keeps the datagram instead of sending it."""
         self.sent.append((asyncio.get_running_loop().time(), fields))
         return True
 

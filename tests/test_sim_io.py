@@ -28,9 +28,11 @@ class JumpClock:
         self.t = 500.0
 
     def now(self) -> float:
+        """The virtual time."""
         return self.t
 
     async def sleep(self, seconds: float) -> None:
+        """Moves the virtual time on at once, then lets the other tasks run."""
         self.t += max(0.0, seconds)
         await asyncio.sleep(0)
 
@@ -139,6 +141,7 @@ class StuckClock(JumpClock):
     """A clock on which every line lasts until it is cancelled."""
 
     async def sleep(self, seconds: float) -> None:
+        """Never ends by itself."""
         await asyncio.Event().wait()
 
 
@@ -150,10 +153,12 @@ class WatchedOutput(io.StringIO):
         self._written = asyncio.Event()
 
     def write(self, text: str) -> int:
+        """Writes, and wakes whoever waits for a line."""
         self._written.set()
         return super().write(text)
 
     async def printed(self, text: str) -> None:
+        """Returns once `text` has been printed."""
         while text not in self.getvalue():
             self._written.clear()
             await self._written.wait()
