@@ -10,9 +10,12 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from kasparctl.game.session import RECORDS_FILE, read_records
 
 KILLS_WANTED = 22
+POLL_S = 0.001  # how often the records are counted while waiting for the next one
 
 
 def record_count(state_dir: Path) -> int:
@@ -47,6 +50,7 @@ def start_demo(state_dir: Path) -> subprocess.Popen[str]:
     )
 
 
+@pytest.mark.slow  # 22 demos started and killed, one after another
 def test_sigkill_at_many_points_then_resume_finishes_without_losing_a_trial(tmp_path: Path) -> None:
     kills: list[int] = []
     kill_at = 1
@@ -56,15 +60,15 @@ def test_sigkill_at_many_points_then_resume_finishes_without_losing_a_trial(tmp_
         deadline = time.monotonic() + 120
         while process.poll() is None and time.monotonic() < deadline:
             if len(kills) < KILLS_WANTED and record_count(tmp_path) >= kill_at:
-                # A little later than the record, so kills land at different moments:
-                # mid-speech, mid-motion, between a record and its snapshot.
+                # The stimulus: 0 to 12 ms after the record, so kills land at different
+                # moments (mid-speech, mid-motion, between a record and its snapshot).
                 time.sleep((kill_at % 5) * 0.003)
                 os.kill(process.pid, signal.SIGKILL)
                 process.wait()
                 kills.append(record_count(tmp_path))
                 kill_at = record_count(tmp_path) + 2
                 break
-            time.sleep(0.001)
+            time.sleep(POLL_S)  # the wait for the next record on disk
         else:
             out, err = process.communicate(timeout=120)
             assert process.returncode == 0, err

@@ -15,14 +15,12 @@ import re
 import signal
 import socket
 import stat
-import subprocess
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-from service_fixtures import DEMO_CONFIG, NotifyListener, running_service
+from service_fixtures import DEMO_CONFIG, PHRASES, RunningService, running_service, spoken
 
 from kasparctl.cli import main
 
@@ -123,27 +121,26 @@ def listening_sockets(pid: int) -> list[dict[str, Any]]:
 
 
 @pytest.fixture
-def service(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], NotifyListener]]:
+def service(tmp_path: Path) -> Iterator[RunningService]:
     with running_service(tmp_path) as running:
         yield running
 
 
-def test_the_running_service_listens_on_nothing(service) -> None:
-    process, listener = service
-    listener.wait_for("READY=1")
+@pytest.mark.slow  # the service in real time, into its first step
+def test_the_running_service_listens_on_nothing(service: RunningService) -> None:
+    process = service.process
+    service.notify.wait_for("READY=1")
     assert listening_sockets(process.pid) == []
 
-    # And with a session under way (the researcher's long green starts it).
-    assert process.stdin is not None
-    process.stdin.write("G")
-    process.stdin.flush()
-    listener.wait_for("STATUS=step 1: placing the bags")
-    time.sleep(1.0)
+    # And with a session under way (the researcher's long green starts it), its
+    # first step's voice and motion running: Kaspar greets the children.
+    service.press("G")
+    service.notify.wait_for("STATUS=step 1: placing the bags")
+    service.stderr.wait_for(lambda line: spoken(line, PHRASES["session"]["greeting"]))
     assert process.poll() is None
     assert listening_sockets(process.pid) == []
 
-    process.send_signal(signal.SIGTERM)
-    assert process.wait(timeout=25) == 0
+    assert service.stop(signal.SIGTERM) == 0
 
 
 def test_the_socket_check_sees_a_listener(tmp_path: Path) -> None:
@@ -169,7 +166,7 @@ def _demo(state_dir: Path, capsys: pytest.CaptureFixture[str], *extra: str) -> d
     code = main(["demo", "--fast", "--seed", "1", "--state-dir", str(state_dir), "--json", *extra])
     output = capsys.readouterr().out
     assert code == 0, output
-    summary = json.loads(output.strip().splitlines()[-1])
+    summary: dict[str, Any] = json.loads(output.strip().splitlines()[-1])
     assert summary["finished"] is True
     return summary
 

@@ -6,13 +6,14 @@ import asyncio
 import io
 import os
 import shutil
+from pathlib import Path
 
 import pytest
 
-from hal.keyfob.api import KeyfobBack, KeyfobLost
+from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobInput, KeyfobLost
 from hal.keyfob.gestures import ANSWERS_ONLY, Gesture, GestureKind, GestureTimings
 from hal.keyfob.sim import ScriptedKeyfob, SimKeyfob, TerminalKeyfob, parse_script
-from hal.voice.api import SpokenStatus
+from hal.voice.api import Spoken, SpokenStatus
 from hal.voice.settings import VoiceSettings
 from hal.voice.sim import SimVoice, speaking_time
 from hal.voice.speaker import Voice
@@ -27,24 +28,26 @@ class JumpClock:
         self.t = 500.0
 
     def now(self) -> float:
+        """The virtual time."""
         return self.t
 
     async def sleep(self, seconds: float) -> None:
+        """Moves the virtual time on at once, then lets the other tasks run."""
         self.t += max(0.0, seconds)
         await asyncio.sleep(0)
 
 
-async def drain(keyfob, count: int):
+async def drain(keyfob: KeyfobInput, count: int) -> list[InputEvent]:
     return [await asyncio.wait_for(keyfob.next_event(), WAIT) for _ in range(count)]
 
 
-def describe(event) -> str:
+def describe(event: InputEvent) -> str:
     if isinstance(event, Gesture):
         return f"{event.kind.value} {event.button}"
     return type(event).__name__
 
 
-async def test_script_gives_every_gesture_of_the_real_keyfob():
+async def test_script_gives_every_gesture_of_the_real_keyfob() -> None:
     clock = JumpClock()
     script = (
         "1 green; 1 red; 1 long green; 1 long red; 1 double red; 1 both; "
@@ -75,15 +78,16 @@ async def test_script_gives_every_gesture_of_the_real_keyfob():
     assert [g.at for g in gestures] == sorted(g.at for g in gestures)
 
 
-async def test_answers_only_presses_are_immediate():
+async def test_answers_only_presses_are_immediate() -> None:
     clock = JumpClock()
     keyfob = SimKeyfob(clock, needs=ANSWERS_ONLY)
     await keyfob.perform("red")
     (press,) = await drain(keyfob, 1)
+    assert isinstance(press, Gesture)
     assert press.kind is GestureKind.PRESS and press.decided == press.at
 
 
-async def test_lost_keyfob_delivers_nothing_until_back():
+async def test_lost_keyfob_delivers_nothing_until_back() -> None:
     keyfob = SimKeyfob(JumpClock(), timings=GestureTimings())
     await keyfob.perform("lost")
     await keyfob.perform("green")
@@ -95,7 +99,7 @@ async def test_lost_keyfob_delivers_nothing_until_back():
     assert keyfob.connected
 
 
-def test_script_errors():
+def test_script_errors() -> None:
     assert parse_script("0.5 green;\n1 long red") == [(0.5, "green"), (1.0, "long red")]
     with pytest.raises(ValueError, match="SECONDS ACTION"):
         parse_script("soon green")
@@ -103,7 +107,7 @@ def test_script_errors():
         ScriptedKeyfob("1 purple", JumpClock())
 
 
-async def test_terminal_keys_become_gestures():
+async def test_terminal_keys_become_gestures() -> None:
     read_end, write_end = os.pipe()
     stream = os.fdopen(read_end, "r")
     keyfob = TerminalKeyfob(JumpClock(), stream=stream)
@@ -118,7 +122,7 @@ async def test_terminal_keys_become_gestures():
         stream.close()
 
 
-async def test_sim_voice_prints_lines_with_times_and_takes_their_time():
+async def test_sim_voice_prints_lines_with_times_and_takes_their_time() -> None:
     clock = JumpClock()
     out = io.StringIO()
     voice = SimVoice(out, clock, rate=120, clips={"greeting": "/clips/hello.wav"})
@@ -134,26 +138,59 @@ async def test_sim_voice_prints_lines_with_times_and_takes_their_time():
 
 
 class StuckClock(JumpClock):
+    """A clock on which every line lasts until it is cancelled."""
+
     async def sleep(self, seconds: float) -> None:
-        await asyncio.sleep(3600)
+        """Never ends by itself."""
+        await asyncio.Event().wait()
 
 
-async def test_sim_voice_cancel_stops_the_line_and_drops_the_queue():
-    voice = SimVoice(io.StringIO(), StuckClock())
+class WatchedOutput(io.StringIO):
+    """The simulated voice's output, telling a waiting test when a line is printed."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._written = asyncio.Event()
+
+    def write(self, text: str) -> int:
+        """Writes, and wakes whoever waits for a line."""
+        self._written.set()
+        return super().write(text)
+
+    async def printed(self, text: str) -> None:
+        """Returns once `text` has been printed."""
+        while text not in self.getvalue():
+            self._written.clear()
+            await self._written.wait()
+
+
+async def test_sim_voice_cancel_stops_the_line_and_drops_the_queue() -> None:
+    out = WatchedOutput()
+    voice = SimVoice(out, StuckClock())
     first = asyncio.create_task(voice.say("a long line"))
-    second = asyncio.create_task(voice.say("queued"))
-    await asyncio.sleep(0.05)
+    await asyncio.wait_for(out.printed("a long line"), WAIT)  # being said
+
+    queued = asyncio.Event()
+
+    async def say_after_the_first() -> Spoken:
+        queued.set()  # say() runs on from here up to waiting for its turn, in this step
+        return await voice.say("queued")
+
+    second = asyncio.create_task(say_after_the_first())
+    await asyncio.wait_for(queued.wait(), WAIT)
     voice.cancel()
     results = await asyncio.wait_for(asyncio.gather(first, second), WAIT)
     assert [r.status for r in results] == [SpokenStatus.CANCELLED] * 2
+    assert "queued" not in out.getvalue()
+
     third = asyncio.create_task(voice.say("after the pause"))
-    await asyncio.sleep(0.05)
+    await asyncio.wait_for(out.printed("after the pause"), WAIT)  # a new line plays
     voice.cancel()
     assert (await asyncio.wait_for(third, WAIT)).status is SpokenStatus.CANCELLED
 
 
 @pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng not installed")
-async def test_sim_voice_can_also_speak_with_espeak_ng(tmp_path):
+async def test_sim_voice_can_also_speak_with_espeak_ng(tmp_path: Path) -> None:
     real = Voice(VoiceSettings(engine="espeak-ng", wav_dir=str(tmp_path)))
     voice = SimVoice(io.StringIO(), JumpClock(), also=real)
     try:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import time
+from pathlib import Path
 
 import pytest
 
@@ -71,7 +72,7 @@ from servo_fixtures import make_driver  # noqa: E402
 from hal.errors import ServoSilent  # noqa: E402
 
 
-def test_virtual_clock_stands_still_while_a_bus_thread_waits_for_a_reply(tmp_path) -> None:
+def test_virtual_clock_stands_still_while_a_bus_thread_waits_for_a_reply(tmp_path: Path) -> None:
     """A silent servo costs real time (the bus's retries) but no simulated time, and a
     simulated timer due meanwhile does not fire early; the emulated shaft moves on
     the simulated clock, so a one-second move takes one simulated second."""
