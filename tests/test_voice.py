@@ -19,7 +19,8 @@ import structlog
 
 from hal.voice.api import SpokenStatus
 from hal.voice.settings import VoiceSettings
-from hal.voice.speaker import PlayerSink, Voice, WavSink
+from hal.voice.sinks import PlayerSink, WavSink
+from hal.voice.speaker import Voice
 from kasparctl.log import configure_logging
 
 pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng not installed")

@@ -37,7 +37,7 @@ from typing import Any, Protocol
 import structlog
 
 from hal.clock import Clock
-from hal.errors import HalError
+from hal.errors import KeyfobError
 from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import Gesture, GestureNeeds, GestureRecognizer, GestureTimings
 from hal.keyfob.settings import KeyfobSettings
@@ -47,10 +47,6 @@ log = structlog.get_logger("kaspar.keyfob")
 EV_SYN, EV_KEY = 0x00, 0x01
 SYN_REPORT, SYN_DROPPED = 0, 3
 KEY_UP, KEY_DOWN, KEY_REPEAT = 0, 1, 2
-
-
-class KeyfobError(HalError):
-    """The keyfob cannot be found or opened (it is retried; this names why)."""
 
 
 class EvdevEvent(Protocol):
