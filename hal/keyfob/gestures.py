@@ -32,6 +32,8 @@ from enum import StrEnum
 
 import structlog
 
+from hal.errors import InvalidArgument, SettingsError
+
 log = structlog.get_logger("kaspar.gestures")
 
 GREEN = "green"
@@ -99,9 +101,9 @@ class GestureTimings:
 
     def __post_init__(self) -> None:
         if not 0 < self.bounce < self.double_press < self.long_press:
-            raise ValueError("expected 0 < bounce < double_press < long_press")
+            raise SettingsError("expected 0 < bounce < double_press < long_press")
         if not 0 < self.both_window < self.long_press:
-            raise ValueError("expected 0 < both_window < long_press")
+            raise SettingsError("expected 0 < both_window < long_press")
 
 
 @dataclass(slots=True)
@@ -152,7 +154,9 @@ class GestureRecognizer:
     def key(self, button: str, down: bool, at: float) -> list[Gesture]:
         """A key change of `button` at clock time `at`; returns the gestures now certain."""
         if button not in self._keys:
-            raise ValueError(f"unknown button {button!r}; expected one of {', '.join(self._keys)}")
+            raise InvalidArgument(
+                f"unknown button {button!r}; expected one of {', '.join(self._keys)}"
+            )
         out = self.advance(at)
         at = self._now
         key = self._keys[button]

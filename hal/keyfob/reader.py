@@ -142,8 +142,15 @@ class Keyfob:
         self._drop_device()
 
     def probe(self) -> str:
-        """Open the configured keyfob once and close it: "path (name)"; KeyfobError or OSError."""
-        device = self._open_device()
+        """Open the configured keyfob once and close it: "path (name)".
+
+        Raises KeyfobError when it cannot be found or opened (the OSError's
+        message, unchanged, or the name that no device has).
+        """
+        try:
+            device = self._open_device()
+        except OSError as error:
+            raise KeyfobError(str(error)) from error
         try:
             return f"{device.path} ({device.name})"
         finally:

@@ -21,6 +21,7 @@ from typing import TextIO
 import structlog
 
 from hal.clock import Clock
+from hal.errors import InvalidArgument
 from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import GREEN, RED, Gesture, GestureNeeds, GestureRecognizer, GestureTimings
 
@@ -121,7 +122,7 @@ class SimKeyfob:
             self._connected = True
             self._events.put_nowait(KeyfobBack(at=self._clock.now(), device="simulated"))
             return []
-        raise ValueError(f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}")
+        raise InvalidArgument(f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}")
 
     async def _wait_until(self, until: float) -> None:
         """Sleep on the clock, delivering any gesture whose time comes meanwhile."""
@@ -158,7 +159,9 @@ class ScriptedKeyfob(SimKeyfob):
     def _steps_check(self, action: str) -> None:
         words = action.split()
         if action not in ACTIONS and not (words[:1] == ["command"] and len(words) == 2):
-            raise ValueError(f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}")
+            raise InvalidArgument(
+                f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}"
+            )
 
     async def start(self) -> None:
         self._task = asyncio.get_running_loop().create_task(self._play())
@@ -188,7 +191,7 @@ def parse_script(text: str) -> list[tuple[float, str]]:
         try:
             script.append((float(delay), action.strip()))
         except ValueError as error:
-            raise ValueError(f"expected 'SECONDS ACTION', found {part!r}") from error
+            raise InvalidArgument(f"expected 'SECONDS ACTION', found {part!r}") from error
     return script
 
 

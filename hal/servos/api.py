@@ -85,7 +85,11 @@ class ServoApi(Protocol):
         ...
 
     async def read_positions(self, group: str | None = None) -> dict[str, float]:
-        """Present positions in degrees of a group's joints (all joints if None)."""
+        """Present positions in degrees of a group's (or one joint's) joints; all if None.
+
+        Raises UnknownJoint for a name that is neither a group nor a joint, and
+        ServoFaultError when a servo does not answer (the fault is latched).
+        """
         ...
 
     async def move(
@@ -95,14 +99,21 @@ class ServoApi(Protocol):
 
         Without a duration, each joint goes at `speed` deg/s, or at its own limit.
         Returns when the motion has been commanded to its end. Raises
-        ServoFaultError while a fault is latched, UnsafeCommand for a joint whose
-        torque has not been turned on by set_compliant(group, False), and KeyError
-        for an unknown joint.
+        ServoFaultError while a fault is latched (or one is latched during the
+        move), UnsafeCommand for a joint whose torque has not been turned on by
+        set_compliant(group, False) and for a NaN target or a negative, infinite
+        duration or speed, and UnknownJoint (a HalError that is also a KeyError)
+        naming every unknown joint; nothing moves when it raises before the start.
         """
         ...
 
     async def set_compliant(self, group: str, compliant: bool) -> None:
-        """Torque off (a child can move the arm by hand) or back on, holding where it is."""
+        """Torque off (a child can move the arm by hand) or back on, holding where it is.
+
+        `group` may also name one joint. Turning torque on raises ServoFaultError
+        while a fault is latched and UnsafeCommand for a joint found outside its
+        range (it stays limp); UnknownJoint for an unknown name.
+        """
         ...
 
     async def rest(self, duration: float | None = None) -> None:

@@ -29,7 +29,14 @@ import serial
 import structlog
 
 from hal.clock import thread_work
-from hal.errors import BusClosed, BusTimeout, CodecError, PortUnavailable, RepeatFilter
+from hal.errors import (
+    BusClosed,
+    BusTimeout,
+    CodecError,
+    InvalidArgument,
+    PortUnavailable,
+    RepeatFilter,
+)
 
 log = structlog.get_logger("hal.servos.bus")
 
@@ -201,7 +208,7 @@ class SerialBus:
         if self._state is BusState.CLOSED or self._loop is None:
             raise BusClosed(f"bus {self.name} is not running")
         if any(e.replies and e.framing is None for e in exchanges):
-            raise ValueError("replies need a framing")
+            raise InvalidArgument("replies need a framing")
         loop = asyncio.get_running_loop()
         future: asyncio.Future[Any] = loop.create_future()
         self._jobs.put(_Job(exchanges, batch, future, loop))

@@ -31,6 +31,7 @@ from hal.errors import (
     RepeatFilter,
     ServoFaultError,
     ServoSilent,
+    UnknownJoint,
     UnsafeCommand,
 )
 from hal.servos.api import Fault, FaultKind, JointStatus, Pose, ServoDriver
@@ -179,7 +180,7 @@ class Joints:
     ) -> None:
         unknown = [name for name in pose if name not in self._joints]
         if unknown:
-            raise KeyError(f"unknown joints: {', '.join(unknown)}")
+            raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
         if duration is not None and not (duration >= 0 and math.isfinite(duration)):
             raise UnsafeCommand(f"duration must be a finite number >= 0, found {duration}")
         if speed is not None and not (speed > 0 and math.isfinite(speed)):
@@ -361,7 +362,7 @@ class Joints:
             return list(self._groups[group])
         if group in self._joints:
             return [group]
-        raise KeyError(f"unknown group or joint {group!r}")
+        raise UnknownJoint(f"unknown group or joint {group!r}")
 
     def _by_driver(self, joints: Iterable[_Joint | str]) -> dict[ServoDriver, list[_Joint]]:
         grouped: dict[ServoDriver, list[_Joint]] = {}

@@ -14,10 +14,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from hal.clock import Clock
-from hal.errors import ServoSilent
+from hal.errors import ServoSilent, UnknownJoint
 from hal.servos.api import FaultKind, Health
 from hal.servos.joints import Joints
-from hal.servos.settings import ServoModel, ServoSettings
+from hal.servos.settings import JointSettings, ServoModel, ServoSettings
 
 
 @dataclass
@@ -138,8 +138,15 @@ class SimServos(Joints):
         self.drivers: dict[str, SimDriver] = drivers
 
     def servo(self, joint: str) -> SimServo:
-        settings = next(j for j in self.settings.joints if j.name == joint)
+        """The simulated servo behind `joint`; UnknownJoint if there is no such joint."""
+        settings = self._joint_settings(joint)
         return self.drivers[settings.bus].servos[settings.id]
+
+    def _joint_settings(self, joint: str) -> JointSettings:
+        for settings in self.settings.joints:
+            if settings.name == joint:
+                return settings
+        raise UnknownJoint(f"unknown joint {joint!r}")
 
     def inject_fault(self, joint: str, kind: FaultKind | None) -> None:
         """From now on the joint's servo reports `kind` (None heals it); the poll latches it."""
@@ -147,7 +154,7 @@ class SimServos(Joints):
 
     def push(self, joint: str, degrees: float) -> None:
         """A child moves a limp joint by hand (ignored while its torque is on)."""
-        settings = next(j for j in self.settings.joints if j.name == joint)
+        settings = self._joint_settings(joint)
         servo = self.servo(joint)
         if not servo.torque:
             servo.present = servo.goal = settings.servo.to_raw(
@@ -156,7 +163,7 @@ class SimServos(Joints):
 
     def true_position(self, joint: str) -> float:
         """Where the simulated joint really is, in degrees (for tests and the demo)."""
-        settings = next(j for j in self.settings.joints if j.name == joint)
+        settings = self._joint_settings(joint)
         # Motion is simulated lazily, at each bus operation: bring it up to now first.
         self.drivers[settings.bus]._advance()
         return settings.servo.to_degrees(
