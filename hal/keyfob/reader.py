@@ -50,26 +50,60 @@ KEY_UP, KEY_DOWN, KEY_REPEAT = 0, 1, 2
 
 
 class EvdevEvent(Protocol):
-    type: int
-    code: int
-    value: int
+    """The part of evdev.InputEvent the keyfob reads: one input_event record."""
 
-    def timestamp(self) -> float: ...
+    @property
+    def type(self) -> int:
+        """EV_KEY for a key change, EV_SYN for the end of a report (or a dropped one)."""
+        ...
+
+    @property
+    def code(self) -> int:
+        """The key's evdev code (KEY_PAGEDOWN), or the SYN_ kind."""
+        ...
+
+    @property
+    def value(self) -> int:
+        """For a key: 0 up, 1 down, 2 autorepeat."""
+        ...
+
+    def timestamp(self) -> float:
+        """The kernel's time of the event in seconds (wall clock unless told otherwise)."""
+        ...
 
 
 class EvdevDevice(Protocol):
-    """The part of evdev.InputDevice the keyfob uses."""
+    """The part of evdev.InputDevice the keyfob uses; tests give a pipe-backed one."""
 
-    path: str
-    name: str
+    @property
+    def path(self) -> str | bytes:
+        """The device node it was opened by."""
+        ...
 
-    def fileno(self) -> int: ...
-    def read(self) -> Iterable[EvdevEvent]: ...
-    def grab(self) -> None: ...
-    def close(self) -> None: ...
+    @property
+    def name(self) -> str:
+        """The name the device reports, as `evtest` lists it."""
+        ...
+
+    def fileno(self) -> int:
+        """The non-blocking descriptor to watch with loop.add_reader."""
+        ...
+
+    def read(self) -> Iterable[EvdevEvent]:
+        """Every event waiting; BlockingIOError when none, OSError(ENODEV) once unplugged."""
+        ...
+
+    def grab(self) -> None:
+        """Take the device for ourselves (EVIOCGRAB); OSError if another holds it."""
+        ...
+
+    def close(self) -> None:
+        """Release the device; the descriptor is closed."""
+        ...
 
 
 def open_evdev(path: str) -> EvdevDevice:
+    """Open the evdev device node `path`; OSError (ENOENT, EACCES, ...) when it cannot be."""
     import evdev
 
     return evdev.InputDevice(path)
@@ -152,7 +186,7 @@ class Keyfob:
         except OSError as error:
             raise KeyfobError(str(error)) from error
         try:
-            return f"{device.path} ({device.name})"
+            return f"{os.fsdecode(device.path)} ({device.name})"
         finally:
             device.close()
 
@@ -175,7 +209,7 @@ class Keyfob:
 
     def _open(self) -> None:
         device = self._open_device()
-        path = device.path
+        path = os.fsdecode(device.path)
         try:
             if self._settings.grab:
                 try:
@@ -306,7 +340,9 @@ class Keyfob:
                     else:
                         assert self._device is not None
                         self._events.put_nowait(
-                            KeyfobBack(at=self._clock.now(), device=self._device.path)
+                            KeyfobBack(
+                                at=self._clock.now(), device=os.fsdecode(self._device.path)
+                            )
                         )
                         return
                     await watch.changed(self._retry_every)

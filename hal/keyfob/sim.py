@@ -16,7 +16,7 @@ import contextlib
 import os
 import sys
 from collections.abc import Iterable
-from typing import TextIO
+from typing import Any, TextIO, TypedDict, Unpack
 
 import structlog
 
@@ -43,6 +43,14 @@ ACTIONS = (
     "back",
 )
 _ACTION_LIST = ", ".join([*ACTIONS, "command NAME"])
+
+
+class SimKeyfobOptions(TypedDict, total=False):
+    """SimKeyfob's options, passed on by the keyfobs built on it."""
+
+    timings: GestureTimings | None
+    needs: GestureNeeds | None
+    commands: Iterable[str]
 
 
 class SimKeyfob:
@@ -147,9 +155,12 @@ class ScriptedKeyfob(SimKeyfob):
     """Plays a script of (seconds to wait, action) from start(); for tests and the demo."""
 
     def __init__(
-        self, script: Iterable[tuple[float, str]] | str, clock: Clock, **options: object
+        self,
+        script: Iterable[tuple[float, str]] | str,
+        clock: Clock,
+        **options: Unpack[SimKeyfobOptions],
     ) -> None:
-        super().__init__(clock, **options)  # type: ignore[arg-type]
+        super().__init__(clock, **options)
         self._script = parse_script(script) if isinstance(script, str) else list(script)
         for _, action in self._script:
             self._steps_check(action)
@@ -216,10 +227,13 @@ TERMINAL_HELP = (
 class TerminalKeyfob(SimKeyfob):
     """Keys typed in the terminal become keyfob actions (one character each)."""
 
-    def __init__(self, clock: Clock, stream: TextIO | None = None, **options: object) -> None:
-        super().__init__(clock, **options)  # type: ignore[arg-type]
+    def __init__(
+        self, clock: Clock, stream: TextIO | None = None, **options: Unpack[SimKeyfobOptions]
+    ) -> None:
+        super().__init__(clock, **options)
         self._stream = stream or sys.stdin
-        self._saved_mode: list[object] | None = None
+        # What termios.tcgetattr returns (typeshed: list[Any]), handed back unchanged.
+        self._saved_mode: list[Any] | None = None
         self._pending: asyncio.Queue[str] = asyncio.Queue()
         self._task: asyncio.Task[None] | None = None
 

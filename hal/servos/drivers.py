@@ -8,9 +8,11 @@ one SYNC_WRITE, S_JOG or multiple-target packet per control step.
 
 from __future__ import annotations
 
+import abc
+import enum
 import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 from hal.errors import BusTimeout, CodecError, PortUnavailable, ServoSilent
 from hal.servos import dynamixel1 as dx1
@@ -23,15 +25,25 @@ from hal.servos.settings import BusSettings
 
 AX12_SPEED_DPS_PER_UNIT = 0.111 * 6  # moving speed unit: 0.111 rpm
 
+T = TypeVar("T")
 
-def _flags(value: int, flag_type: Any) -> tuple[str, ...]:
+
+def _flags(value: int, flag_type: type[enum.IntFlag]) -> tuple[str, ...]:
     return tuple(str(flag.name) for flag in flag_type if value & flag)
 
 
-class _BusDriver:
-    framing: Framing
+class BusDriver(abc.ABC):
+    """A ServoDriver over one SerialBus; a subclass per protocol family says the packets.
+
+    Every call runs on the event loop and awaits the bus thread. A servo that
+    does not answer, or whose every reply is corrupt, raises ServoSilent naming
+    it; a lost adapter raises PortUnavailable.
+    """
+
+    framing: Framing  # how the protocol's replies are cut out of the byte stream
 
     def __init__(self, bus: SerialBus) -> None:
+        """Drive the servos on `bus`; the bus is started and closed with the driver."""
         self.bus = bus
 
     async def _each(self, ids: Sequence[int], exchanges: list[Exchange]) -> list[Any]:
@@ -48,17 +60,44 @@ class _BusDriver:
         return outcomes
 
     async def start(self) -> None:
+        """Start the bus thread; returns within a second even while the port is away."""
         await self.bus.start()
 
     async def close(self) -> None:
+        """Stop the bus thread and release the port."""
         await self.bus.close()
 
     def retried(self) -> int:
+        """Replies this bus has retried so far (corrupt or late, then good)."""
         return self.bus.stats.retries
 
+    @abc.abstractmethod
+    async def ping(self, servo_id: int) -> int | None:
+        """The model number of a servo that answers (0 if the protocol has none); None if silent."""
+
+    @abc.abstractmethod
+    async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        """Present raw positions; ServoSilent names the first servo that did not answer."""
+
+    @abc.abstractmethod
+    async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        """Raw goal and speed limit (deg/s) per servo, reached within `step` seconds."""
+
+    @abc.abstractmethod
+    async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        """Torque on or off for every servo in `ids`, in as few packets as the protocol allows."""
+
+    @abc.abstractmethod
+    async def read_health(self, servo_id: int) -> Health:
+        """One servo's condition; `kind` set when its error bits mean a fault."""
+
+    @abc.abstractmethod
+    async def reset_errors(self, ids: Sequence[int]) -> None:
+        """Clear the servos' own latched error state, where the protocol latches one."""
+
     async def _ask(
-        self, servo_id: int, request: bytes, decode: Callable[[list[bytes]], Any], expect: int
-    ) -> Any:
+        self, servo_id: int, request: bytes, decode: Callable[[list[bytes]], T], expect: int
+    ) -> T:
         try:
             return await self.bus.transact(request, 1, self.framing, decode, expect)
         except (BusTimeout, CodecError) as error:
@@ -67,7 +106,7 @@ class _BusDriver:
             raise ServoSilent(servo_id, message) from None
 
 
-class Dynamixel1Driver(_BusDriver):
+class Dynamixel1Driver(BusDriver):
     framing = Framing(dx1.HEAD_SIZE, dx1.packet_length)
 
     def _status(self, servo_id: int, length: int) -> Callable[[list[bytes]], dx1.Status]:
@@ -142,7 +181,7 @@ class Dynamixel1Driver(_BusDriver):
         )
 
 
-class Dynamixel2Driver(_BusDriver):
+class Dynamixel2Driver(BusDriver):
     framing = Framing(dx2.HEAD_SIZE, dx2.packet_length)
 
     def _status(self, servo_id: int, length: int) -> Callable[[list[bytes]], dx2.Status]:
@@ -221,18 +260,17 @@ class Dynamixel2Driver(_BusDriver):
         elif hardware:
             kind = FaultKind.HARDWARE
         load = int.from_bytes(params[0:2], "little", signed=True) / 1000
-        offset = lambda address: address - start  # noqa: E731
         return Health(
-            position=dx2.s32(params, offset(dx2.XSeries.PRESENT_POSITION)),
-            temperature_c=float(params[offset(dx2.XSeries.PRESENT_TEMPERATURE)]),
-            voltage_v=dx2.u16(params, offset(dx2.XSeries.PRESENT_INPUT_VOLTAGE)) / 10,
+            position=dx2.s32(params, dx2.XSeries.PRESENT_POSITION - start),
+            temperature_c=float(params[dx2.XSeries.PRESENT_TEMPERATURE - start]),
+            voltage_v=dx2.u16(params, dx2.XSeries.PRESENT_INPUT_VOLTAGE - start) / 10,
             load=load,
             flags=_flags(hardware, dx2.HardwareError),
             kind=kind,
         )
 
 
-class HerkulexDriver(_BusDriver):
+class HerkulexDriver(BusDriver):
     framing = Framing(hx.HEAD_SIZE, hx.packet_length)
 
     def _ack(self, servo_id: int, command: hx.Command) -> Callable[[list[bytes]], hx.Ack]:
@@ -322,7 +360,7 @@ class HerkulexDriver(_BusDriver):
         )
 
 
-class MaestroDriver(_BusDriver):
+class MaestroDriver(BusDriver):
     framing = Framing(2, lambda head: 2)
 
     async def ping(self, servo_id: int) -> int | None:
@@ -382,7 +420,7 @@ class MaestroDriver(_BusDriver):
         return Health(flags=_flags(errors, mo.Errors))
 
 
-DRIVERS: dict[str, type[_BusDriver]] = {
+DRIVERS: dict[str, type[BusDriver]] = {
     "dynamixel1": Dynamixel1Driver,
     "dynamixel2": Dynamixel2Driver,
     "herkulex": HerkulexDriver,
@@ -390,7 +428,8 @@ DRIVERS: dict[str, type[_BusDriver]] = {
 }
 
 
-def driver_for(settings: BusSettings) -> _BusDriver:
+def driver_for(settings: BusSettings) -> BusDriver:
+    """The driver of the bus's protocol over a new SerialBus (not started) on its port."""
     bus = SerialBus(
         settings.name,
         settings.port,

@@ -172,10 +172,10 @@ class Voice:
             status = SpokenStatus.TIMED_OUT if request.timed_out else SpokenStatus.CANCELLED
             error = f"no end after {self._settings.timeout} s" if request.timed_out else None
             return Spoken(status, request.text, request.via, started, ended, request.wav, error)
-        error = task.exception()
-        if error is not None:
+        failure = task.exception()
+        if failure is not None:
             return Spoken(
-                SpokenStatus.FAILED, request.text, None, started, ended, None, str(error)
+                SpokenStatus.FAILED, request.text, None, started, ended, None, str(failure)
             )
         spoken = task.result()
         return Spoken(
