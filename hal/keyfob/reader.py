@@ -122,6 +122,13 @@ class Keyfob:
         input_dir: str = "/dev/input",
         retry_every: float = 5.0,
     ) -> None:
+        """Read the keyfob that `settings` names, stamping gestures with `clock`.
+
+        `needs` are the gestures listened for at first (set_needs changes them);
+        `opener` opens a device node (evdev's, or a test's pipe device); `input_dir`
+        is watched for the keyfob's return, and looked at again every `retry_every`
+        seconds in case an inotify event was missed. Nothing is opened until start().
+        """
         self._settings = settings
         self._clock = clock
         self._opener = opener
@@ -150,22 +157,31 @@ class Keyfob:
     # -- KeyfobInput --------------------------------------------------------
 
     async def start(self) -> None:
+        """Open the keyfob on the running loop, or report KeyfobLost and watch for it.
+
+        Never raises for a missing or unreadable keyfob: the game starts without
+        it and is told when it comes.
+        """
         try:
             self._open()
         except (OSError, KeyfobError) as error:
             self._report_lost(f"not available at start: {_describe(error)}")
 
     async def next_event(self) -> InputEvent:
+        """The next gesture or lost/back event, in order; waits as long as it takes."""
         return await self._events.get()
 
     def set_needs(self, needs: GestureNeeds) -> None:
+        """Which gestures the game listens for from each button's next key-down."""
         self._recogniser.set_needs(needs)
 
     @property
     def connected(self) -> bool:
+        """True while the device is open and read."""
         return self._device is not None
 
     async def close(self) -> None:
+        """Stop the gesture timer and the reopen watch, and release the device; idempotent."""
         self._closed = True
         for task in (self._timer, self._watch):
             if task is not None:
@@ -361,12 +377,18 @@ class DirectoryWatch:
     _IN_NONBLOCK, _IN_CLOEXEC = os.O_NONBLOCK, 0o2000000
 
     def __init__(self, directories: Iterable[str]) -> None:
+        """Watch `directories` once entered (on the running loop); missing ones are added later."""
         self._directories = list(directories)
         self._libc: Any = None
         self._fd = -1
         self._changed: asyncio.Event | None = None
 
     def __enter__(self) -> DirectoryWatch:
+        """Start inotify and register it with the running loop.
+
+        Without inotify (a sandbox that forbids it) this logs a warning and
+        changed() only waits out its timeout.
+        """
         self._changed = asyncio.Event()
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
         fd = libc.inotify_init1(self._IN_NONBLOCK | self._IN_CLOEXEC)
@@ -380,6 +402,7 @@ class DirectoryWatch:
         return self
 
     def __exit__(self, *exc: object) -> None:
+        """Unregister and close the inotify descriptor."""
         if self._fd >= 0:
             asyncio.get_running_loop().remove_reader(self._fd)
             os.close(self._fd)

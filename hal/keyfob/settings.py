@@ -127,7 +127,10 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
         return self.device or DEFAULT_DEVICE
 
     def key_map(self) -> dict[int, str]:
-        """evdev code -> button ("green", "red") or researcher command name."""
+        """Each mapped key's evdev code -> its button ("green", "red") or command name.
+
+        Raises SettingsError for a key evdev does not know (checked at decoding too).
+        """
         mapping = {key_code(self.green): "green", key_code(self.red): "red"}
         for key, command in self.commands.items():
             mapping[key_code(_number_or_name(key))] = command

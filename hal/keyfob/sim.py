@@ -64,6 +64,7 @@ class SimKeyfob:
         needs: GestureNeeds | None = None,
         commands: Iterable[str] = (),
     ) -> None:
+        """A keyfob on `clock` with the recogniser's `timings`, `needs` and command keys."""
         self._clock = clock
         self._timings = timings or GestureTimings()
         self._recogniser = GestureRecognizer(
@@ -75,23 +76,32 @@ class SimKeyfob:
         self._closed = False
 
     async def start(self) -> None:
+        """Nothing to open: the keys are pressed by perform()."""
         pass
 
     async def next_event(self) -> InputEvent:
+        """The next gesture or lost/back event, in order; waits as long as it takes."""
         return await self._events.get()
 
     def set_needs(self, needs: GestureNeeds) -> None:
+        """Which gestures the game listens for from each button's next key-down."""
         self._recogniser.set_needs(needs)
 
     @property
     def connected(self) -> bool:
+        """False between the actions "lost" and "back"."""
         return self._connected
 
     async def close(self) -> None:
+        """Mark the keyfob closed; nothing else to release."""
         self._closed = True
 
     async def perform(self, action: str) -> None:
-        """Press the keys of one action, then wait until its gestures are certain."""
+        """Press the keys of one action, then wait until its gestures are certain.
+
+        Key times are planned on the clock, so a stalled process cannot turn a
+        press into a long press. Raises InvalidArgument for an unknown action.
+        """
         async with self._lock:
             # Key times are the planned ones, as a real keyfob's carry the kernel's
             # timestamps: a process stalled mid-press (a busy machine, a fast
@@ -160,6 +170,10 @@ class ScriptedKeyfob(SimKeyfob):
         clock: Clock,
         **options: Unpack[SimKeyfobOptions],
     ) -> None:
+        """Play `script` ("1.5 green; 0.5 long red", or (delay, action) pairs) from start().
+
+        Every action is checked here: InvalidArgument names the first unknown one.
+        """
         super().__init__(clock, **options)
         self._script = parse_script(script) if isinstance(script, str) else list(script)
         for _, action in self._script:
@@ -175,6 +189,7 @@ class ScriptedKeyfob(SimKeyfob):
             )
 
     async def start(self) -> None:
+        """Start playing the script on the running loop; `done` is set after its last action."""
         self._task = asyncio.get_running_loop().create_task(self._play())
 
     async def _play(self) -> None:
@@ -184,6 +199,7 @@ class ScriptedKeyfob(SimKeyfob):
         self.done.set()
 
     async def close(self) -> None:
+        """Stop the script where it is."""
         await super().close()
         if self._task is not None:
             self._task.cancel()
@@ -192,7 +208,11 @@ class ScriptedKeyfob(SimKeyfob):
 
 
 def parse_script(text: str) -> list[tuple[float, str]]:
-    """ "1.5 green; 0.5 long red" -> [(1.5, "green"), (0.5, "long red")]."""
+    """Parse "1.5 green; 0.5 long red" into [(1.5, "green"), (0.5, "long red")].
+
+    Parts are separated by ";" or new lines; InvalidArgument for a part that is
+    not SECONDS ACTION (the action itself is checked by ScriptedKeyfob).
+    """
     script = []
     for part in text.replace("\n", ";").split(";"):
         part = part.strip()
@@ -230,6 +250,7 @@ class TerminalKeyfob(SimKeyfob):
     def __init__(
         self, clock: Clock, stream: TextIO | None = None, **options: Unpack[SimKeyfobOptions]
     ) -> None:
+        """Read keys from `stream` (standard input by default) once started."""
         super().__init__(clock, **options)
         self._stream = stream or sys.stdin
         # What termios.tcgetattr returns (typeshed: list[Any]), handed back unchanged.
@@ -238,6 +259,11 @@ class TerminalKeyfob(SimKeyfob):
         self._task: asyncio.Task[None] | None = None
 
     async def start(self) -> None:
+        """Put a terminal in cbreak mode and read keys on the running loop.
+
+        A stream that cannot be watched (a regular file, /dev/null under a service)
+        is only logged: there is nobody to press keys.
+        """
         fd = self._stream.fileno()
         if os.isatty(fd):
             import termios
@@ -270,6 +296,7 @@ class TerminalKeyfob(SimKeyfob):
             await self.perform(await self._pending.get())
 
     async def close(self) -> None:
+        """Stop reading keys and give the terminal its mode back."""
         await super().close()
         fd = self._stream.fileno()
         asyncio.get_running_loop().remove_reader(fd)

@@ -14,6 +14,8 @@ from typing import Protocol, runtime_checkable
 
 
 class FaultKind(enum.Enum):
+    """Why a joint's fault was latched; the value is what logs and session records show."""
+
     SILENT = "silent"  # the servo stopped answering
     OVERHEATING = "overheating"
     OVERLOAD = "overload"
@@ -32,6 +34,7 @@ class Fault:
     time: float  # Clock.now() when it was latched
 
     def __str__(self) -> str:
+        """"joint: kind (detail)", as the robot logs and announces it."""
         return f"{self.joint}: {self.kind.value} ({self.detail})"
 
 
@@ -155,11 +158,20 @@ class Health:
 
 
 class ServoDriver(Protocol):
-    """The servos of one bus in raw units; each call is as few packets as the protocol allows."""
+    """The servos of one bus in raw units; each call is as few packets as the protocol allows.
 
-    async def start(self) -> None: ...
+    Only the joints layer calls a driver, from the event loop. Any call may raise
+    PortUnavailable while the serial adapter is away, and another BusError when
+    the bus fails otherwise (BusClosed after close()).
+    """
 
-    async def close(self) -> None: ...
+    async def start(self) -> None:
+        """Open the bus (a real one keeps retrying the port while it is away)."""
+        ...
+
+    async def close(self) -> None:
+        """Release the bus; no call is made after this."""
+        ...
 
     async def ping(self, servo_id: int) -> int | None:
         """The model number of a servo that answers, or None when it is silent."""
@@ -173,9 +185,13 @@ class ServoDriver(Protocol):
         """Raw goal and speed limit (deg/s) per servo, reached within `step` seconds; one packet."""
         ...
 
-    async def set_torque(self, ids: Sequence[int], on: bool) -> None: ...
+    async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        """Torque on or off for every servo in `ids` (on a Maestro, off stops the pulses)."""
+        ...
 
-    async def read_health(self, servo_id: int) -> Health: ...
+    async def read_health(self, servo_id: int) -> Health:
+        """One servo's condition; raises ServoSilent when it does not answer."""
+        ...
 
     async def reset_errors(self, ids: Sequence[int]) -> None:
         """Clear the servos' own latched error state (where the protocol latches one)."""

@@ -95,6 +95,8 @@ class Framing:
 
 
 class BusState(enum.Enum):
+    """Whether the owner thread holds the port; changes are reported on the event loop."""
+
     CONNECTED = "connected"
     DISCONNECTED = "disconnected"
     CLOSED = "closed"
@@ -102,6 +104,8 @@ class BusState(enum.Enum):
 
 @dataclass
 class BusStats:
+    """Counters of one bus since it was made; written by its owner thread only."""
+
     transactions: int = 0
     bytes_out: int = 0
     bytes_in: int = 0
@@ -147,7 +151,12 @@ _STOP = object()
 
 @dataclass
 class SerialBus:
-    """Owns one serial port. Create, `await start()`, `await transact(...)`, `await close()`."""
+    """Owns one serial port. Create, `await start()`, `await transact(...)`, `await close()`.
+
+    Its methods are called from one event loop; the port itself belongs to the
+    owner thread. `timeout_margin` and the backoffs are in seconds; `on_state`
+    is called on the event loop at each change of state.
+    """
 
     name: str
     port: str
@@ -160,6 +169,7 @@ class SerialBus:
     stats: BusStats = field(default_factory=BusStats)
 
     def __post_init__(self) -> None:
+        """Prepare the job queue and state; nothing runs until start()."""
         self._jobs: queue.SimpleQueue[Any] = queue.SimpleQueue()
         self._serial: SerialPort | None = None
         self._thread: threading.Thread | None = None
@@ -175,10 +185,12 @@ class SerialBus:
 
     @property
     def state(self) -> BusState:
+        """The state as last reported by the owner thread."""
         return self._state
 
     @property
     def connected(self) -> bool:
+        """True while the port is open."""
         return self._state is BusState.CONNECTED
 
     async def start(self) -> None:
@@ -289,6 +301,10 @@ class SerialBus:
             raise BusTimeout(f"bus {self.name}: the bus thread did not answer") from None
 
     async def close(self) -> None:
+        """Stop the owner thread and release the port; queued transactions fail with BusClosed.
+
+        Waits up to 5 s for the thread (off the event loop); a second close() does nothing.
+        """
         if self._thread is None:
             self._state = BusState.CLOSED
             return

@@ -62,6 +62,12 @@ class Voice:
         sink: Sink | None = None,
         engine_factory: Callable[[], Pyttsx3Engine] = default_engine_factory,
     ) -> None:
+        """The voice of `settings`; `clock` stamps each Spoken and times out utterances.
+
+        `sink` replaces the one the settings name (a WAV file, a bench's probe);
+        `engine_factory` builds each pyttsx3 engine, on its own thread. Nothing starts
+        until the first say().
+        """
         self._settings = settings
         self._clock = clock or MonotonicClock()
         self._sink = sink or sink_for(settings)
@@ -77,9 +83,16 @@ class Voice:
 
     @property
     def engine(self) -> str:
+        """The configured engine, tried first ("espeak-ng" or "pyttsx3")."""
         return self._settings.engine
 
     async def say(self, text: str, key: str | None = None) -> Spoken:
+        """Speak `text` (or the clip of phrase `key`) after what is queued; returns when it ends.
+
+        Failures are results, not exceptions (SpokenStatus FAILED or TIMED_OUT with
+        the error). A caller cancelled while waiting also drops its line, queued or
+        playing. Raises VoiceError only when the voice is closed.
+        """
         if self._closed:
             raise VoiceError("the voice is closed")
         if self._worker is None:
@@ -94,12 +107,18 @@ class Voice:
             raise
 
     def cancel(self) -> None:
+        """Stop the current line and drop everything queued (each resolves CANCELLED)."""
         while not self._queue.empty():
             self._resolve(self._queue.get_nowait(), SpokenStatus.CANCELLED, None)
         if self._current is not None:
             self._current[1].cancel()
 
     async def close(self) -> None:
+        """Cancel, stop the worker, retire the pyttsx3 threads and close the sink; idempotent.
+
+        Waits up to CLOSE_GRACE_S per thread (off the loop); a thread stuck in
+        libespeak-ng is left behind (it is a daemon thread).
+        """
         if self._closed:
             return
         self._closed = True
