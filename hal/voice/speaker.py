@@ -65,8 +65,9 @@ class Voice:
         """The voice of `settings`; `clock` stamps each Spoken and times out utterances.
 
         `sink` replaces the one the settings name (a WAV file, a bench's probe);
-        `engine_factory` builds each pyttsx3 engine, on its own thread. Nothing starts
-        until the first say().
+        `engine_factory` builds each pyttsx3 engine, on its own thread. No worker
+        or engine starts until the first say() (a player sink makes its temporary
+        directory now).
         """
         self._settings = settings
         self._clock = clock or MonotonicClock()
