@@ -24,8 +24,9 @@ import time
 import tracemalloc
 from pathlib import Path
 
+from hal.voice.processes import spawn, stop
 from hal.voice.settings import VoiceSettings
-from hal.voice.speaker import Voice, _spawn, _stop
+from hal.voice.speaker import Voice
 
 LINE = "I think the lion is in this bag."  # 8 words, typical of the game
 RUNS = 40
@@ -55,7 +56,7 @@ class FirstSampleSink:
         return None
 
     async def espeak(self, argv: list[str], text: str) -> str | None:
-        process = await _spawn([*argv, "--stdout"], stdin=True, stdout=asyncio.subprocess.PIPE)
+        process = await spawn([*argv, "--stdout"], stdin=True, stdout=asyncio.subprocess.PIPE)
         try:
             process.stdin.write(text.encode())
             process.stdin.close()
@@ -64,7 +65,7 @@ class FirstSampleSink:
             await process.stdout.read()
             await process.wait()
         finally:
-            await _stop(process)
+            await stop(process)
         return None
 
     def close(self) -> None:

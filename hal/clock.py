@@ -15,20 +15,26 @@ from typing import Protocol
 
 
 class Clock(Protocol):
+    """Where the HAL and the game read the time and wait; injected, never global."""
+
     def now(self) -> float:
         """Monotonic seconds; only differences are meaningful."""
         ...
 
-    async def sleep(self, seconds: float) -> None: ...
+    async def sleep(self, seconds: float) -> None:
+        """Wait `seconds` of this clock's time; on a virtual clock no real time passes."""
+        ...
 
 
 class MonotonicClock:
     """The real clock: time.monotonic and asyncio.sleep."""
 
     def now(self) -> float:
+        """time.monotonic(): seconds since an arbitrary start."""
         return time.monotonic()
 
     async def sleep(self, seconds: float) -> None:
+        """asyncio.sleep: real seconds."""
         await asyncio.sleep(seconds)
 
 
@@ -36,9 +42,11 @@ class LoopClock:
     """The running event loop's clock: real on the robot, simulated under kasparctl.sim.simtime."""
 
     def now(self) -> float:
+        """loop.time(): seconds, jumping ahead when the loop is simulated."""
         return asyncio.get_running_loop().time()
 
     async def sleep(self, seconds: float) -> None:
+        """asyncio.sleep on the loop: real seconds, or simulated ones under simtime."""
         await asyncio.sleep(seconds)
 
 

@@ -8,7 +8,7 @@ import pytest
 from emulators.dynamixel import Dynamixel1Emulator
 from servo_fixtures import make_driver
 
-from hal.errors import BusClosed, PortUnavailable, ServoSilent
+from hal.errors import BusClosed, InvalidArgument, PortUnavailable, ServoSilent
 from hal.servos import dynamixel1 as dx1
 from hal.servos.bus import BusState, SerialBus, wire_time
 
@@ -139,6 +139,12 @@ async def test_closed_bus_refuses_work(ax12):
     await driver.close()
     with pytest.raises(BusClosed):
         await driver.read_positions([1])
+
+
+async def test_replies_without_a_framing_are_refused_before_anything_is_sent(ax12, driver):
+    with pytest.raises(InvalidArgument, match="replies need a framing"):
+        await driver.bus.transact(dx1.ping(1), replies=1)
+    assert driver.bus.stats.transactions == 0
 
 
 async def test_the_loop_is_never_blocked_by_a_slow_transaction(ax12, driver):

@@ -6,6 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hal.errors import InvalidArgument, SettingsError
 from hal.keyfob.gestures import (
     ANSWER,
     ANSWER_OR_LONG,
@@ -176,8 +177,9 @@ def test_command_keys_fire_at_key_down():
 
 
 def test_unknown_button_is_a_programming_error():
-    with pytest.raises(ValueError, match="unknown button"):
+    with pytest.raises(InvalidArgument, match="unknown button 'blue'") as caught:
         GestureRecognizer(T).key("blue", True, 0.0)
+    assert isinstance(caught.value, ValueError)
 
 
 def test_reset_keeps_complete_presses_and_drops_holds():
@@ -206,8 +208,10 @@ def test_key_with_no_needs_is_silent():
 
 
 def test_timings_are_checked():
-    with pytest.raises(ValueError):
+    with pytest.raises(SettingsError, match="expected 0 < bounce < double_press < long_press"):
         GestureTimings(long_press=0.3, double_press=0.4)
+    with pytest.raises(SettingsError, match="expected 0 < both_window < long_press"):
+        GestureTimings(both_window=1.0)
 
 
 events = st.lists(

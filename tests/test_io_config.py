@@ -71,7 +71,11 @@ hello = "/usr/share/kaspar/hello.wav"
             "[keyfob]\nlong_press = 0.3",
             "kaspar.toml: keyfob: expected bounce < double_press < long_press, found 0.03 / 0.4 / 0.3",
         ),
-        ("[keyfob]\nbounce = -1.0", "kaspar.toml: keyfob: bounce: expected seconds between 0 and 10"),
+        ("[keyfob]\nbounce = -1.0", "kaspar.toml: keyfob.bounce: expected > 0 and <= 10 s, found -1.0"),
+        (
+            "[keyfob]\nreopen_grace = 61.0",
+            "kaspar.toml: keyfob.reopen_grace: expected > 0 and <= 60 s, found 61.0",
+        ),
         (
             "[keyfob]\ngreen = 'KEY_NOPE'",
             "kaspar.toml: keyfob: green: expected a key name known to evdev, found 'KEY_NOPE'",
@@ -79,19 +83,40 @@ hello = "/usr/share/kaspar/hello.wav"
         ("[keyfob]\nred = 'pageup'", "kaspar.toml: keyfob: red: expected a key name such as"),
         ("[keyfob]\nred = 'KEY_PAGEDOWN'", "kaspar.toml: keyfob: red uses the same key as green"),
         ("[keyfob]\ndevice = '/dev/x'\nname = 'x'", "kaspar.toml: keyfob: set device or name, not both"),
-        ("[keyfob]\ndevice = 'event3'", "kaspar.toml: keyfob: expected an absolute device path"),
-        ("[keyfob.commands]\nKEY_P = 'Pause!'", "kaspar.toml: keyfob: commands: expected a name like"),
-        ("[keyfob.commands]\nKEY_P = 'green'", "kaspar.toml: keyfob: commands: expected a name like"),
+        (
+            "[keyfob]\ndevice = 'event3'",
+            "kaspar.toml: keyfob.device: expected an absolute device path, found 'event3'",
+        ),
+        ("[keyfob]\nname = ' '", "kaspar.toml: keyfob.name: expected a device name, found an empty string"),
+        (
+            "[keyfob.commands]\nKEY_P = 'Pause!'",
+            "kaspar.toml: keyfob.commands.KEY_P: expected a name like 'pause', found 'Pause!'",
+        ),
+        (
+            "[keyfob.commands]\nKEY_P = 'green'",
+            "kaspar.toml: keyfob.commands.KEY_P: expected a name like 'pause', found 'green'",
+        ),
+        ("[keyfob.commands]\nKEY_NOPE = 'pause'", "kaspar.toml: keyfob: commands.KEY_NOPE: expected a key name known"),
         ("[voice]\nengine = 'festival'", "kaspar.toml: voice.engine: expected one of 'pyttsx3', 'espeak-ng'"),
-        ("[voice]\nrate = 20", "kaspar.toml: voice: rate: expected 80 to 450 words per minute, found 20"),
-        ("[voice]\nvolume = 1.5", "kaspar.toml: voice: volume: expected 0.0 to 1.0, found 1.5"),
-        ("[voice]\ntimeout = 0.1", "kaspar.toml: voice: timeout: expected 1 to 300 seconds"),
-        ("[voice]\nvoice = 'en gb'", "kaspar.toml: voice: voice: expected a voice name like 'en-gb'"),
+        ("[voice]\nrate = 20", "kaspar.toml: voice.rate: expected 80 to 450 words per minute, found 20"),
+        ("[voice]\nvolume = 1.5", "kaspar.toml: voice.volume: expected 0 to 1, found 1.5"),
+        ("[voice]\ntimeout = 0.1", "kaspar.toml: voice.timeout: expected 1 to 300 s, found 0.1"),
+        ("[voice]\nvoice = 'en gb'", "kaspar.toml: voice.voice: expected a voice name like 'en-gb', found 'en gb'"),
+        # A pattern's $ would let a trailing newline through; the name is matched whole.
+        (
+            '[voice]\nvoice = "en-gb\\n"',
+            "kaspar.toml: voice.voice: expected a voice name like 'en-gb', found 'en-gb\\n'",
+        ),
         ("[voice]\nplayer = []", "kaspar.toml: voice: player: expected a command"),
         (
             "[voice.clips]\nhello = 'hello.wav'",
-            "kaspar.toml: voice: clips.hello: expected an absolute .wav path, found 'hello.wav'",
+            "kaspar.toml: voice.clips.hello: expected an absolute .wav path, found 'hello.wav'",
         ),
+        (
+            "[voice.clips]\nhello = '/clips/hello.mp3'",
+            "kaspar.toml: voice.clips.hello: expected an absolute .wav path, found '/clips/hello.mp3'",
+        ),
+        ("[voice.clips]\n'hel lo' = '/a.wav'", "kaspar.toml: voice: clips: expected a phrase key, found 'hel lo'"),
         ("[voice]\nspeed = 1", "kaspar.toml: voice.speed: unknown key; expected one of:"),
     ],
 )

@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from servo_fixtures import FakeClock, eventually, make_driver, servo_settings
 
-from hal.errors import ServoFaultError, UnsafeCommand
+from hal.errors import HalError, ServoFaultError, UnknownJoint, UnsafeCommand
 from hal.servos.api import FaultKind, ServoApi
 from hal.servos.joints import Joints
 from hal.servos.sim import SimServos
@@ -224,8 +224,15 @@ async def test_rest_brings_every_powered_joint_to_its_rest_position():
 
 async def test_unknown_joints_and_nonsense_values_are_refused():
     servos = await started()
-    with pytest.raises(KeyError):
-        await servos.move({"tail": 1.0})
+    with pytest.raises(UnknownJoint) as caught:
+        await servos.move({"tail": 1.0, "torso": 0.0, "fin": 2.0})
+    assert str(caught.value) == "unknown joints: tail, fin"  # not KeyError's quoted repr
+    # A HalError for the game and the daemon, still a KeyError for older callers.
+    assert isinstance(caught.value, HalError) and isinstance(caught.value, KeyError)
+    with pytest.raises(UnknownJoint, match="unknown group or joint 'tail'"):
+        await servos.set_compliant("tail", False)
+    with pytest.raises(UnknownJoint, match="unknown group or joint 'arms'"):
+        await servos.read_positions("arms")
     with pytest.raises(UnsafeCommand):
         await servos.move({"torso": float("nan")})
     with pytest.raises(UnsafeCommand):

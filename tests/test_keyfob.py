@@ -11,10 +11,11 @@ from evdev import ecodes
 from evdev_pipe import ManualClock, PipeBank, pack
 
 from hal.clock import MonotonicClock
+from hal.errors import KeyfobError, SettingsError
 from hal.keyfob.api import KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import ANSWERS_ONLY, RESEARCHER_GESTURES, Gesture, GestureKind
 from hal.keyfob.reader import Keyfob
-from hal.keyfob.settings import KeyfobSettings
+from hal.keyfob.settings import KeyfobSettings, key_code
 
 GREEN, RED, PAUSE = ecodes.KEY_PAGEDOWN, ecodes.KEY_PAGEUP, ecodes.KEY_P
 NODE = "kaspar-keyfob"
@@ -252,6 +253,36 @@ async def test_open_by_name_among_other_devices(bank):
         assert kinds(await next_event(keyfob)) == [("press", "red")]
     finally:
         await keyfob.close()
+
+
+def test_probe_names_a_keyfob_that_cannot_be_opened(bank):
+    missing = Keyfob(settings_for(bank.directory), MonotonicClock(), opener=bank.open)
+    with pytest.raises(KeyfobError, match="No such file") as caught:
+        missing.probe()
+    assert isinstance(caught.value.__cause__, OSError)
+    by_name = Keyfob(
+        KeyfobSettings(name="Kaspar keyfob"), MonotonicClock(), input_dir=str(bank.directory)
+    )
+    with pytest.raises(KeyfobError, match="no input device named 'Kaspar keyfob'"):
+        by_name.probe()
+    bank.plug(NODE)
+    assert Keyfob(settings_for(bank.directory), MonotonicClock(), opener=bank.open).probe() == (
+        f"{bank.directory / NODE} (Kaspar keyfob)"
+    )
+
+
+@pytest.mark.parametrize(
+    ("key", "message"),
+    [
+        (0, "expected a key code between 1 and 767, found 0"),
+        ("pageup", "expected a key name such as 'KEY_PAGEDOWN' or a number, found 'pageup'"),
+        ("KEY_NOPE", "expected a key name known to evdev, found 'KEY_NOPE'"),
+    ],
+)
+def test_a_key_that_is_not_one_is_a_settings_error(key, message):
+    with pytest.raises(SettingsError, match=message) as caught:
+        key_code(key)
+    assert isinstance(caught.value, ValueError)
 
 
 async def test_kernel_overflow_forgets_holds(bank):

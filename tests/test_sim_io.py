@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from hal.errors import HalError, InvalidArgument
 from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobInput, KeyfobLost
 from hal.keyfob.gestures import ANSWERS_ONLY, Gesture, GestureKind, GestureTimings
 from hal.keyfob.sim import ScriptedKeyfob, SimKeyfob, TerminalKeyfob, parse_script
@@ -101,10 +102,17 @@ async def test_lost_keyfob_delivers_nothing_until_back() -> None:
 
 def test_script_errors() -> None:
     assert parse_script("0.5 green;\n1 long red") == [(0.5, "green"), (1.0, "long red")]
-    with pytest.raises(ValueError, match="SECONDS ACTION"):
+    with pytest.raises(InvalidArgument, match="SECONDS ACTION"):
         parse_script("soon green")
-    with pytest.raises(ValueError, match="unknown keyfob action 'purple'"):
+    with pytest.raises(InvalidArgument, match="unknown keyfob action 'purple'"):
         ScriptedKeyfob("1 purple", JumpClock())
+
+
+async def test_an_unknown_action_performed_is_named() -> None:
+    keyfob = SimKeyfob(JumpClock())
+    with pytest.raises(InvalidArgument, match="unknown keyfob action 'long blue'") as caught:
+        await keyfob.perform("long blue")
+    assert isinstance(caught.value, HalError) and isinstance(caught.value, ValueError)
 
 
 async def test_terminal_keys_become_gestures() -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from servo_fixtures import FakeClock, servo_settings
 
-from hal.errors import ServoSilent
+from hal.errors import HalError, ServoSilent, UnknownJoint
 from hal.servos.api import FaultKind
 from hal.servos.sim import SimServos
 
@@ -34,6 +34,13 @@ async def test_a_servo_moves_toward_its_goal_at_the_written_speed_in_clock_time(
     assert positions[3] - start == pytest.approx(30.0 / servo.model.degrees_per_unit, abs=1)
     sim.clock.t += 10.0
     assert (await driver.read_positions([3]))[3] == servo.model.raw_centre + 300
+
+
+async def test_an_unknown_joint_is_named(sim):
+    for call in (sim.servo, sim.true_position, lambda name: sim.push(name, 10.0)):
+        with pytest.raises(UnknownJoint, match="unknown joint 'tail'") as caught:
+            call("tail")
+        assert isinstance(caught.value, HalError)
 
 
 async def test_a_silent_servo_does_not_answer_or_move(sim):

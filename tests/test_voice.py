@@ -17,9 +17,11 @@ import numpy as np
 import pytest
 import structlog
 
+from hal.errors import InvalidArgument, VoiceError
 from hal.voice.api import SpokenStatus
 from hal.voice.settings import VoiceSettings
-from hal.voice.speaker import PlayerSink, Voice, WavSink
+from hal.voice.sinks import PlayerSink, WavSink
+from hal.voice.speaker import Voice
 from kasparctl.log import configure_logging
 
 pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng not installed")
@@ -306,6 +308,19 @@ async def test_single_file_sink(tmp_path):
     assert spoken.wav == str(target) and len(frames(target)) > 1000
 
 
+def test_a_wav_sink_needs_a_directory_or_a_file(tmp_path):
+    for arguments in ({}, {"directory": tmp_path, "file": tmp_path / "x.wav"}):
+        with pytest.raises(InvalidArgument, match="give a directory or a file"):
+            WavSink(**arguments)
+
+
+async def test_a_closed_voice_refuses_to_speak(tmp_path):
+    voice = voice_for(tmp_path, engine="espeak-ng")
+    await voice.close()
+    with pytest.raises(VoiceError, match="the voice is closed"):
+        await voice.say("too late")
+
+
 @pytest.fixture
 def reset_logging():
     yield
@@ -332,4 +347,4 @@ def test_say_command_reports_a_bad_configuration(tmp_path, capsys, reset_logging
     config = tmp_path / "kaspar.toml"
     config.write_text("[voice]\nrate = 5\n")
     assert main(["say", "Hello", "--wav", str(tmp_path / "x.wav"), "--config", str(config)]) == 1
-    assert "voice: rate: expected 80 to 450" in capsys.readouterr().err
+    assert "voice.rate: expected 80 to 450 words per minute, found 5" in capsys.readouterr().err

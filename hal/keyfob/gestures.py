@@ -32,6 +32,8 @@ from enum import StrEnum
 
 import structlog
 
+from hal.errors import InvalidArgument, SettingsError
+
 log = structlog.get_logger("kaspar.gestures")
 
 GREEN = "green"
@@ -41,6 +43,8 @@ CHORD = (GREEN, RED)
 
 
 class GestureKind(StrEnum):
+    """What a gesture is; the value is what session records show."""
+
     PRESS = "press"
     LONG = "long"
     DOUBLE = "double"
@@ -51,6 +55,8 @@ class GestureKind(StrEnum):
 
 @dataclass(frozen=True, slots=True)
 class Gesture:
+    """One gesture, once it is certain; times are the caller's clock, in seconds."""
+
     kind: GestureKind
     # "green", "red", "both", or the researcher command name of an extra key.
     button: str
@@ -75,6 +81,7 @@ class GestureNeeds:
     both: bool = True
 
     def of(self, button: str) -> frozenset[GestureKind]:
+        """The gestures listened for on `button`; a command key only ever gives its press."""
         if button == GREEN:
             return self.green
         if button == RED:
@@ -92,16 +99,23 @@ ANSWERS_ONLY = GestureNeeds(green=ANSWER, red=ANSWER, both=False)
 
 @dataclass(frozen=True, slots=True)
 class GestureTimings:
+    """The recogniser's thresholds in seconds (KeyfobSettings carries the configured ones).
+
+    Raises SettingsError unless 0 < bounce < double_press < long_press and
+    0 < both_window < long_press.
+    """
+
     long_press: float = 1.0
     double_press: float = 0.4
     bounce: float = 0.03
     both_window: float = 0.3
 
     def __post_init__(self) -> None:
+        """Check the order of the thresholds; SettingsError otherwise."""
         if not 0 < self.bounce < self.double_press < self.long_press:
-            raise ValueError("expected 0 < bounce < double_press < long_press")
+            raise SettingsError("expected 0 < bounce < double_press < long_press")
         if not 0 < self.both_window < self.long_press:
-            raise ValueError("expected 0 < both_window < long_press")
+            raise SettingsError("expected 0 < both_window < long_press")
 
 
 @dataclass(slots=True)
@@ -135,6 +149,7 @@ class GestureRecognizer:
     _now: float = field(init=False, default=float("-inf"))
 
     def __post_init__(self) -> None:
+        """Give every button and command key its idle state."""
         self.commands = frozenset(self.commands)
         self._keys = {name: _Key() for name in (*CHORD, *sorted(self.commands))}
 
@@ -144,15 +159,23 @@ class GestureRecognizer:
 
     @property
     def buttons(self) -> tuple[str, ...]:
+        """Green, red, then the command keys in name order."""
         return tuple(self._keys)
 
     def held(self) -> tuple[str, ...]:
+        """The buttons down right now (a release inside the bounce gap still counts as down)."""
         return tuple(name for name, key in self._keys.items() if key.down_at is not None)
 
     def key(self, button: str, down: bool, at: float) -> list[Gesture]:
-        """A key change of `button` at clock time `at`; returns the gestures now certain."""
+        """A key change of `button` at clock time `at`; returns the gestures now certain.
+
+        Times never go back: an `at` before the last one seen is taken as that one.
+        Raises InvalidArgument for a button the recogniser was not built with.
+        """
         if button not in self._keys:
-            raise ValueError(f"unknown button {button!r}; expected one of {', '.join(self._keys)}")
+            raise InvalidArgument(
+                f"unknown button {button!r}; expected one of {', '.join(self._keys)}"
+            )
         out = self.advance(at)
         at = self._now
         key = self._keys[button]

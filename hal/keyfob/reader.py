@@ -37,7 +37,7 @@ from typing import Any, Protocol
 import structlog
 
 from hal.clock import Clock
-from hal.errors import HalError
+from hal.errors import KeyfobError
 from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import Gesture, GestureNeeds, GestureRecognizer, GestureTimings
 from hal.keyfob.settings import KeyfobSettings
@@ -49,31 +49,61 @@ SYN_REPORT, SYN_DROPPED = 0, 3
 KEY_UP, KEY_DOWN, KEY_REPEAT = 0, 1, 2
 
 
-class KeyfobError(HalError):
-    """The keyfob cannot be found or opened (it is retried; this names why)."""
-
-
 class EvdevEvent(Protocol):
-    type: int
-    code: int
-    value: int
+    """The part of evdev.InputEvent the keyfob reads: one input_event record."""
 
-    def timestamp(self) -> float: ...
+    @property
+    def type(self) -> int:
+        """EV_KEY for a key change, EV_SYN for the end of a report (or a dropped one)."""
+        ...
+
+    @property
+    def code(self) -> int:
+        """The key's evdev code (KEY_PAGEDOWN), or the SYN_ kind."""
+        ...
+
+    @property
+    def value(self) -> int:
+        """For a key: 0 up, 1 down, 2 autorepeat."""
+        ...
+
+    def timestamp(self) -> float:
+        """The kernel's time of the event in seconds (wall clock unless told otherwise)."""
+        ...
 
 
 class EvdevDevice(Protocol):
-    """The part of evdev.InputDevice the keyfob uses."""
+    """The part of evdev.InputDevice the keyfob uses; tests give a pipe-backed one."""
 
-    path: str
-    name: str
+    @property
+    def path(self) -> str | bytes:
+        """The device node it was opened by."""
+        ...
 
-    def fileno(self) -> int: ...
-    def read(self) -> Iterable[EvdevEvent]: ...
-    def grab(self) -> None: ...
-    def close(self) -> None: ...
+    @property
+    def name(self) -> str:
+        """The name the device reports, as `evtest` lists it."""
+        ...
+
+    def fileno(self) -> int:
+        """The non-blocking descriptor to watch with loop.add_reader."""
+        ...
+
+    def read(self) -> Iterable[EvdevEvent]:
+        """Every event waiting; BlockingIOError when none, OSError(ENODEV) once unplugged."""
+        ...
+
+    def grab(self) -> None:
+        """Take the device for ourselves (EVIOCGRAB); OSError if another holds it."""
+        ...
+
+    def close(self) -> None:
+        """Release the device; the descriptor is closed."""
+        ...
 
 
 def open_evdev(path: str) -> EvdevDevice:
+    """Open the evdev device node `path`; OSError (ENOENT, EACCES, ...) when it cannot be."""
     import evdev
 
     return evdev.InputDevice(path)
@@ -92,6 +122,13 @@ class Keyfob:
         input_dir: str = "/dev/input",
         retry_every: float = 5.0,
     ) -> None:
+        """Read the keyfob that `settings` names, stamping gestures with `clock`.
+
+        `needs` are the gestures listened for at first (set_needs changes them);
+        `opener` opens a device node (evdev's, or a test's pipe device); `input_dir`
+        is watched for the keyfob's return, and looked at again every `retry_every`
+        seconds in case an inotify event was missed. Nothing is opened until start().
+        """
         self._settings = settings
         self._clock = clock
         self._opener = opener
@@ -120,22 +157,31 @@ class Keyfob:
     # -- KeyfobInput --------------------------------------------------------
 
     async def start(self) -> None:
+        """Open the keyfob on the running loop, or report KeyfobLost and watch for it.
+
+        Never raises for a missing or unreadable keyfob: the game starts without
+        it and is told when it comes.
+        """
         try:
             self._open()
         except (OSError, KeyfobError) as error:
             self._report_lost(f"not available at start: {_describe(error)}")
 
     async def next_event(self) -> InputEvent:
+        """The next gesture or lost/back event, in order; waits as long as it takes."""
         return await self._events.get()
 
     def set_needs(self, needs: GestureNeeds) -> None:
+        """Which gestures the game listens for from each button's next key-down."""
         self._recogniser.set_needs(needs)
 
     @property
     def connected(self) -> bool:
+        """True while the device is open and read."""
         return self._device is not None
 
     async def close(self) -> None:
+        """Stop the gesture timer and the reopen watch, and release the device; idempotent."""
         self._closed = True
         for task in (self._timer, self._watch):
             if task is not None:
@@ -146,10 +192,17 @@ class Keyfob:
         self._drop_device()
 
     def probe(self) -> str:
-        """Open the configured keyfob once and close it: "path (name)"; KeyfobError or OSError."""
-        device = self._open_device()
+        """Open the configured keyfob once and close it: "path (name)".
+
+        Raises KeyfobError when it cannot be found or opened (the OSError's
+        message, unchanged, or the name that no device has).
+        """
         try:
-            return f"{device.path} ({device.name})"
+            device = self._open_device()
+        except OSError as error:
+            raise KeyfobError(str(error)) from error
+        try:
+            return f"{os.fsdecode(device.path)} ({device.name})"
         finally:
             device.close()
 
@@ -172,7 +225,7 @@ class Keyfob:
 
     def _open(self) -> None:
         device = self._open_device()
-        path = device.path
+        path = os.fsdecode(device.path)
         try:
             if self._settings.grab:
                 try:
@@ -303,7 +356,9 @@ class Keyfob:
                     else:
                         assert self._device is not None
                         self._events.put_nowait(
-                            KeyfobBack(at=self._clock.now(), device=self._device.path)
+                            KeyfobBack(
+                                at=self._clock.now(), device=os.fsdecode(self._device.path)
+                            )
                         )
                         return
                     await watch.changed(self._retry_every)
@@ -322,12 +377,18 @@ class DirectoryWatch:
     _IN_NONBLOCK, _IN_CLOEXEC = os.O_NONBLOCK, 0o2000000
 
     def __init__(self, directories: Iterable[str]) -> None:
+        """Watch `directories` once entered (on the running loop); missing ones are added later."""
         self._directories = list(directories)
         self._libc: Any = None
         self._fd = -1
         self._changed: asyncio.Event | None = None
 
     def __enter__(self) -> DirectoryWatch:
+        """Start inotify and register it with the running loop.
+
+        Without inotify (a sandbox that forbids it) this logs a warning and
+        changed() only waits out its timeout.
+        """
         self._changed = asyncio.Event()
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
         fd = libc.inotify_init1(self._IN_NONBLOCK | self._IN_CLOEXEC)
@@ -341,6 +402,7 @@ class DirectoryWatch:
         return self
 
     def __exit__(self, *exc: object) -> None:
+        """Unregister and close the inotify descriptor."""
         if self._fd >= 0:
             asyncio.get_running_loop().remove_reader(self._fd)
             os.close(self._fd)

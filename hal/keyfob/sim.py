@@ -16,11 +16,12 @@ import contextlib
 import os
 import sys
 from collections.abc import Iterable
-from typing import TextIO
+from typing import Any, TextIO, TypedDict, Unpack
 
 import structlog
 
 from hal.clock import Clock
+from hal.errors import InvalidArgument
 from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import GREEN, RED, Gesture, GestureNeeds, GestureRecognizer, GestureTimings
 
@@ -44,6 +45,14 @@ ACTIONS = (
 _ACTION_LIST = ", ".join([*ACTIONS, "command NAME"])
 
 
+class SimKeyfobOptions(TypedDict, total=False):
+    """SimKeyfob's options, passed on by the keyfobs built on it."""
+
+    timings: GestureTimings | None
+    needs: GestureNeeds | None
+    commands: Iterable[str]
+
+
 class SimKeyfob:
     """A keyfob whose keys are pressed by `perform`; satisfies hal.keyfob.api.KeyfobInput."""
 
@@ -55,6 +64,7 @@ class SimKeyfob:
         needs: GestureNeeds | None = None,
         commands: Iterable[str] = (),
     ) -> None:
+        """A keyfob on `clock` with the recogniser's `timings`, `needs` and command keys."""
         self._clock = clock
         self._timings = timings or GestureTimings()
         self._recogniser = GestureRecognizer(
@@ -66,23 +76,32 @@ class SimKeyfob:
         self._closed = False
 
     async def start(self) -> None:
+        """Nothing to open: the keys are pressed by perform()."""
         pass
 
     async def next_event(self) -> InputEvent:
+        """The next gesture or lost/back event, in order; waits as long as it takes."""
         return await self._events.get()
 
     def set_needs(self, needs: GestureNeeds) -> None:
+        """Which gestures the game listens for from each button's next key-down."""
         self._recogniser.set_needs(needs)
 
     @property
     def connected(self) -> bool:
+        """False between the actions "lost" and "back"."""
         return self._connected
 
     async def close(self) -> None:
+        """Mark the keyfob closed; nothing else to release."""
         self._closed = True
 
     async def perform(self, action: str) -> None:
-        """Press the keys of one action, then wait until its gestures are certain."""
+        """Press the keys of one action, then wait until its gestures are certain.
+
+        Key times are planned on the clock, so a stalled process cannot turn a
+        press into a long press. Raises InvalidArgument for an unknown action.
+        """
         async with self._lock:
             # Key times are the planned ones, as a real keyfob's carry the kernel's
             # timestamps: a process stalled mid-press (a busy machine, a fast
@@ -121,7 +140,7 @@ class SimKeyfob:
             self._connected = True
             self._events.put_nowait(KeyfobBack(at=self._clock.now(), device="simulated"))
             return []
-        raise ValueError(f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}")
+        raise InvalidArgument(f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}")
 
     async def _wait_until(self, until: float) -> None:
         """Sleep on the clock, delivering any gesture whose time comes meanwhile."""
@@ -146,9 +165,16 @@ class ScriptedKeyfob(SimKeyfob):
     """Plays a script of (seconds to wait, action) from start(); for tests and the demo."""
 
     def __init__(
-        self, script: Iterable[tuple[float, str]] | str, clock: Clock, **options: object
+        self,
+        script: Iterable[tuple[float, str]] | str,
+        clock: Clock,
+        **options: Unpack[SimKeyfobOptions],
     ) -> None:
-        super().__init__(clock, **options)  # type: ignore[arg-type]
+        """Play `script` ("1.5 green; 0.5 long red", or (delay, action) pairs) from start().
+
+        Every action is checked here: InvalidArgument names the first unknown one.
+        """
+        super().__init__(clock, **options)
         self._script = parse_script(script) if isinstance(script, str) else list(script)
         for _, action in self._script:
             self._steps_check(action)
@@ -158,9 +184,12 @@ class ScriptedKeyfob(SimKeyfob):
     def _steps_check(self, action: str) -> None:
         words = action.split()
         if action not in ACTIONS and not (words[:1] == ["command"] and len(words) == 2):
-            raise ValueError(f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}")
+            raise InvalidArgument(
+                f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}"
+            )
 
     async def start(self) -> None:
+        """Start playing the script on the running loop; `done` is set after its last action."""
         self._task = asyncio.get_running_loop().create_task(self._play())
 
     async def _play(self) -> None:
@@ -170,6 +199,7 @@ class ScriptedKeyfob(SimKeyfob):
         self.done.set()
 
     async def close(self) -> None:
+        """Stop the script where it is."""
         await super().close()
         if self._task is not None:
             self._task.cancel()
@@ -178,7 +208,11 @@ class ScriptedKeyfob(SimKeyfob):
 
 
 def parse_script(text: str) -> list[tuple[float, str]]:
-    """ "1.5 green; 0.5 long red" -> [(1.5, "green"), (0.5, "long red")]."""
+    """Parse "1.5 green; 0.5 long red" into [(1.5, "green"), (0.5, "long red")].
+
+    Parts are separated by ";" or new lines; InvalidArgument for a part that is
+    not SECONDS ACTION (the action itself is checked by ScriptedKeyfob).
+    """
     script = []
     for part in text.replace("\n", ";").split(";"):
         part = part.strip()
@@ -188,7 +222,7 @@ def parse_script(text: str) -> list[tuple[float, str]]:
         try:
             script.append((float(delay), action.strip()))
         except ValueError as error:
-            raise ValueError(f"expected 'SECONDS ACTION', found {part!r}") from error
+            raise InvalidArgument(f"expected 'SECONDS ACTION', found {part!r}") from error
     return script
 
 
@@ -213,14 +247,23 @@ TERMINAL_HELP = (
 class TerminalKeyfob(SimKeyfob):
     """Keys typed in the terminal become keyfob actions (one character each)."""
 
-    def __init__(self, clock: Clock, stream: TextIO | None = None, **options: object) -> None:
-        super().__init__(clock, **options)  # type: ignore[arg-type]
+    def __init__(
+        self, clock: Clock, stream: TextIO | None = None, **options: Unpack[SimKeyfobOptions]
+    ) -> None:
+        """Read keys from `stream` (standard input by default) once started."""
+        super().__init__(clock, **options)
         self._stream = stream or sys.stdin
-        self._saved_mode: list[object] | None = None
+        # What termios.tcgetattr returns (typeshed: list[Any]), handed back unchanged.
+        self._saved_mode: list[Any] | None = None
         self._pending: asyncio.Queue[str] = asyncio.Queue()
         self._task: asyncio.Task[None] | None = None
 
     async def start(self) -> None:
+        """Put a terminal in cbreak mode and read keys on the running loop.
+
+        A stream that cannot be watched (a regular file, /dev/null under a service)
+        is only logged: there is nobody to press keys.
+        """
         fd = self._stream.fileno()
         if os.isatty(fd):
             import termios
@@ -253,6 +296,7 @@ class TerminalKeyfob(SimKeyfob):
             await self.perform(await self._pending.get())
 
     async def close(self) -> None:
+        """Stop reading keys and give the terminal its mode back."""
         await super().close()
         fd = self._stream.fileno()
         asyncio.get_running_loop().remove_reader(fd)

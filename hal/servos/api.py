@@ -14,6 +14,8 @@ from typing import Protocol, runtime_checkable
 
 
 class FaultKind(enum.Enum):
+    """Why a joint's fault was latched; the value is what logs and session records show."""
+
     SILENT = "silent"  # the servo stopped answering
     OVERHEATING = "overheating"
     OVERLOAD = "overload"
@@ -32,6 +34,7 @@ class Fault:
     time: float  # Clock.now() when it was latched
 
     def __str__(self) -> str:
+        """"joint: kind (detail)", as the robot logs and announces it."""
         return f"{self.joint}: {self.kind.value} ({self.detail})"
 
 
@@ -85,7 +88,11 @@ class ServoApi(Protocol):
         ...
 
     async def read_positions(self, group: str | None = None) -> dict[str, float]:
-        """Present positions in degrees of a group's joints (all joints if None)."""
+        """Present positions in degrees of a group's (or one joint's) joints; all if None.
+
+        Raises UnknownJoint for a name that is neither a group nor a joint, and
+        ServoFaultError when a servo does not answer (the fault is latched).
+        """
         ...
 
     async def move(
@@ -95,14 +102,21 @@ class ServoApi(Protocol):
 
         Without a duration, each joint goes at `speed` deg/s, or at its own limit.
         Returns when the motion has been commanded to its end. Raises
-        ServoFaultError while a fault is latched, UnsafeCommand for a joint whose
-        torque has not been turned on by set_compliant(group, False), and KeyError
-        for an unknown joint.
+        ServoFaultError while a fault is latched (or one is latched during the
+        move), UnsafeCommand for a joint whose torque has not been turned on by
+        set_compliant(group, False) and for a NaN target or a negative, infinite
+        duration or speed, and UnknownJoint (a HalError that is also a KeyError)
+        naming every unknown joint; nothing moves when it raises before the start.
         """
         ...
 
     async def set_compliant(self, group: str, compliant: bool) -> None:
-        """Torque off (a child can move the arm by hand) or back on, holding where it is."""
+        """Torque off (a child can move the arm by hand) or back on, holding where it is.
+
+        `group` may also name one joint. Turning torque on raises ServoFaultError
+        while a fault is latched and UnsafeCommand for a joint found outside its
+        range (it stays limp); UnknownJoint for an unknown name.
+        """
         ...
 
     async def rest(self, duration: float | None = None) -> None:
@@ -144,11 +158,20 @@ class Health:
 
 
 class ServoDriver(Protocol):
-    """The servos of one bus in raw units; each call is as few packets as the protocol allows."""
+    """The servos of one bus in raw units; each call is as few packets as the protocol allows.
 
-    async def start(self) -> None: ...
+    Only the joints layer calls a driver, from the event loop. Any call may raise
+    PortUnavailable while the serial adapter is away, and another BusError when
+    the bus fails otherwise (BusClosed after close()).
+    """
 
-    async def close(self) -> None: ...
+    async def start(self) -> None:
+        """Open the bus (a real one keeps retrying the port while it is away)."""
+        ...
+
+    async def close(self) -> None:
+        """Release the bus; no call is made after this."""
+        ...
 
     async def ping(self, servo_id: int) -> int | None:
         """The model number of a servo that answers, or None when it is silent."""
@@ -162,9 +185,13 @@ class ServoDriver(Protocol):
         """Raw goal and speed limit (deg/s) per servo, reached within `step` seconds; one packet."""
         ...
 
-    async def set_torque(self, ids: Sequence[int], on: bool) -> None: ...
+    async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        """Torque on or off for every servo in `ids` (on a Maestro, off stops the pulses)."""
+        ...
 
-    async def read_health(self, servo_id: int) -> Health: ...
+    async def read_health(self, servo_id: int) -> Health:
+        """One servo's condition; raises ServoSilent when it does not answer."""
+        ...
 
     async def reset_errors(self, ids: Sequence[int]) -> None:
         """Clear the servos' own latched error state (where the protocol latches one)."""

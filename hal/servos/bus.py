@@ -23,19 +23,62 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar, overload
 
-import serial
+import serial  # pyserial ships no types: the bus sees a port through SerialPort
 import structlog
 
 from hal.clock import thread_work
-from hal.errors import BusClosed, BusTimeout, CodecError, PortUnavailable, RepeatFilter
+from hal.errors import (
+    BusClosed,
+    BusTimeout,
+    CodecError,
+    InvalidArgument,
+    PortUnavailable,
+    RepeatFilter,
+)
 
 log = structlog.get_logger("hal.servos.bus")
 
 T = TypeVar("T")
 
 BITS_PER_BYTE = 10  # start + 8 data + stop
+
+# pyserial's failure of a port that cannot be opened, or has gone.
+SerialException: type[Exception] = serial.SerialException
+
+
+class SerialPort(Protocol):
+    """The part of serial.Serial the bus thread uses; only that thread touches it."""
+
+    def fileno(self) -> int:
+        """The descriptor the thread waits on with select() and reads with os.read()."""
+        ...
+
+    def write(self, data: bytes, /) -> int | None:
+        """Send `data`; SerialException (or OSError) when the adapter has gone."""
+        ...
+
+    def reset_input_buffer(self) -> None:
+        """Drop bytes received but not read (a late reply to an earlier attempt)."""
+        ...
+
+    def set_low_latency_mode(self, low_latency_settings: bool, /) -> None:
+        """ASYNC_LOW_LATENCY; OSError, ValueError or AttributeError where unsupported."""
+        ...
+
+    def close(self) -> None:
+        """Release the port."""
+        ...
+
+
+def open_port(path: str, baud: int) -> SerialPort:
+    """Open `path` exclusively, non-blocking reads, a 1 s write timeout.
+
+    Raises SerialException, OSError or ValueError when it cannot be opened.
+    """
+    port: SerialPort = serial.Serial(path, baud, timeout=0, write_timeout=1.0, exclusive=True)
+    return port
 
 
 def wire_time(n_bytes: int, baud: int) -> float:
@@ -52,6 +95,8 @@ class Framing:
 
 
 class BusState(enum.Enum):
+    """Whether the owner thread holds the port; changes are reported on the event loop."""
+
     CONNECTED = "connected"
     DISCONNECTED = "disconnected"
     CLOSED = "closed"
@@ -59,6 +104,8 @@ class BusState(enum.Enum):
 
 @dataclass
 class BusStats:
+    """Counters of one bus since it was made; written by its owner thread only."""
+
     transactions: int = 0
     bytes_out: int = 0
     bytes_in: int = 0
@@ -104,7 +151,12 @@ _STOP = object()
 
 @dataclass
 class SerialBus:
-    """Owns one serial port. Create, `await start()`, `await transact(...)`, `await close()`."""
+    """Owns one serial port. Create, `await start()`, `await transact(...)`, `await close()`.
+
+    Its methods are called from one event loop; the port itself belongs to the
+    owner thread. `timeout_margin` and the backoffs are in seconds; `on_state`
+    is called on the event loop at each change of state.
+    """
 
     name: str
     port: str
@@ -117,8 +169,9 @@ class SerialBus:
     stats: BusStats = field(default_factory=BusStats)
 
     def __post_init__(self) -> None:
+        """Prepare the job queue and state; nothing runs until start()."""
         self._jobs: queue.SimpleQueue[Any] = queue.SimpleQueue()
-        self._serial: serial.Serial | None = None
+        self._serial: SerialPort | None = None
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._state = BusState.DISCONNECTED
@@ -132,10 +185,12 @@ class SerialBus:
 
     @property
     def state(self) -> BusState:
+        """The state as last reported by the owner thread."""
         return self._state
 
     @property
     def connected(self) -> bool:
+        """True while the port is open."""
         return self._state is BusState.CONNECTED
 
     async def start(self) -> None:
@@ -169,6 +224,26 @@ class SerialBus:
             1, replies
         )
 
+    @overload
+    async def transact(
+        self,
+        request: bytes,
+        replies: int,
+        framing: Framing,
+        decode: Callable[[list[bytes]], T],
+        expect: int = 0,
+    ) -> T: ...
+
+    @overload
+    async def transact(
+        self,
+        request: bytes,
+        replies: int = 0,
+        framing: Framing | None = None,
+        decode: None = None,
+        expect: int = 0,
+    ) -> list[bytes]: ...
+
     async def transact(
         self,
         request: bytes,
@@ -176,16 +251,20 @@ class SerialBus:
         framing: Framing | None = None,
         decode: Callable[[list[bytes]], T] | None = None,
         expect: int = 0,
-    ) -> T | list[bytes]:
+    ) -> object:
         """Send `request`, read `replies` packets (framed by `framing`) and decode them.
 
         `expect` is the number of reply bytes expected in all (for the deadline);
         `decode` turns the packets into the result and raises a CodecError for a
-        reply that must be retried (corrupt, wrong id). Raises BusTimeout after the
-        retries, PortUnavailable while the adapter is away, BusClosed after close().
+        reply that must be retried (corrupt, wrong id); without it the result is
+        the packets. Raises BusTimeout after the retries, PortUnavailable while
+        the adapter is away, BusClosed after close(), InvalidArgument for replies
+        without a framing. Runs on the event loop; the I/O is the bus thread's.
         """
-        outcome = await self._submit([Exchange(request, replies, framing, decode, expect)], False)
-        return outcome  # type: ignore[no-any-return]
+        outcome: object = await self._submit(
+            [Exchange(request, replies, framing, decode, expect)], False
+        )
+        return outcome
 
     async def exchange_all(self, exchanges: Sequence[Exchange]) -> list[Any]:
         """Run `exchanges` back to back on the bus thread, with a single hand-off.
@@ -195,13 +274,14 @@ class SerialBus:
         result or the exception that ended that exchange (BusTimeout, CodecError);
         once the port is lost the rest are PortUnavailable.
         """
-        return await self._submit(list(exchanges), True)  # type: ignore[no-any-return]
+        outcomes: list[Any] = await self._submit(list(exchanges), True)
+        return outcomes
 
     async def _submit(self, exchanges: list[Exchange], batch: bool) -> Any:
         if self._state is BusState.CLOSED or self._loop is None:
             raise BusClosed(f"bus {self.name} is not running")
         if any(e.replies and e.framing is None for e in exchanges):
-            raise ValueError("replies need a framing")
+            raise InvalidArgument("replies need a framing")
         loop = asyncio.get_running_loop()
         future: asyncio.Future[Any] = loop.create_future()
         self._jobs.put(_Job(exchanges, batch, future, loop))
@@ -221,6 +301,10 @@ class SerialBus:
             raise BusTimeout(f"bus {self.name}: the bus thread did not answer") from None
 
     async def close(self) -> None:
+        """Stop the owner thread and release the port; queued transactions fail with BusClosed.
+
+        Waits up to 5 s for the thread (off the event loop); a second close() does nothing.
+        """
         if self._thread is None:
             self._state = BusState.CLOSED
             return
@@ -280,8 +364,8 @@ class SerialBus:
         if time.monotonic() < self._next_open:
             return
         try:
-            port = serial.Serial(self.port, self.baud, timeout=0, write_timeout=1.0, exclusive=True)
-        except (serial.SerialException, OSError, ValueError) as error:
+            port = open_port(self.port, self.baud)
+        except (SerialException, OSError, ValueError) as error:
             if self._repeats.first("open", str(error)):
                 self._log.warning("serial port cannot be opened; retrying", error=str(error))
             self._next_open = time.monotonic() + self._backoff
@@ -300,12 +384,12 @@ class SerialBus:
         self._backoff = self.backoff_initial
         self._set_state(BusState.CONNECTED)
 
-    def _request_low_latency(self, port: serial.Serial) -> None:
+    def _request_low_latency(self, port: SerialPort) -> None:
         # ASYNC_LOW_LATENCY makes the kernel push received bytes at once; ftdi_sio
         # also maps it to a 1 ms latency timer. A pty does not support it.
         try:
             port.set_low_latency_mode(True)
-        except (OSError, ValueError, AttributeError, serial.SerialException) as error:
+        except (OSError, ValueError, AttributeError, SerialException) as error:
             if self._repeats.first("low-latency", str(error)):
                 self._log.info("low-latency mode not available on this port", error=str(error))
 
@@ -353,14 +437,11 @@ class SerialBus:
                 self._serial.write(exchange.request)
                 self.stats.bytes_out += len(exchange.request)
                 deadline = time.monotonic() + timeout
-                packets = [
-                    self._read_packet(exchange.framing, deadline)  # type: ignore[arg-type]
-                    for _ in range(exchange.replies)
-                ]
+                packets = self._read_replies(exchange, deadline)
                 if exchange.decode is None:
                     return packets
                 return exchange.decode(packets)
-            except (serial.SerialException, OSError, termios.error) as error:
+            except (SerialException, OSError, termios.error) as error:
                 self._lost(error)
                 raise PortUnavailable(f"bus {self.name}: {error}") from None
             except (BusTimeout, CodecError) as error:
@@ -370,6 +451,13 @@ class SerialBus:
             raise BusTimeout(f"bus {self.name}: {last} (after {self.retries} retries)")
         assert last is not None
         raise last
+
+    def _read_replies(self, exchange: Exchange, deadline: float) -> list[bytes]:
+        if not exchange.replies:
+            return []
+        assert exchange.framing is not None, "_submit refuses replies without a framing"
+        framing = exchange.framing
+        return [self._read_packet(framing, deadline) for _ in range(exchange.replies)]
 
     def _read_packet(self, framing: Framing, deadline: float) -> bytes:
         head = self._read_exact(framing.head_size, deadline)
@@ -389,7 +477,7 @@ class SerialBus:
                 continue
             chunk = os.read(fd, count - len(data))
             if not chunk:  # readable yet empty: the device has gone (pty hang-up, USB unplug)
-                raise serial.SerialException("readable but no data: the device has gone")
+                raise SerialException("readable but no data: the device has gone")
             data += chunk
             self.stats.bytes_in += len(chunk)
         return data

@@ -8,9 +8,11 @@ one SYNC_WRITE, S_JOG or multiple-target packet per control step.
 
 from __future__ import annotations
 
+import abc
+import enum
 import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 from hal.errors import BusTimeout, CodecError, PortUnavailable, ServoSilent
 from hal.servos import dynamixel1 as dx1
@@ -23,15 +25,25 @@ from hal.servos.settings import BusSettings
 
 AX12_SPEED_DPS_PER_UNIT = 0.111 * 6  # moving speed unit: 0.111 rpm
 
+T = TypeVar("T")
 
-def _flags(value: int, flag_type: Any) -> tuple[str, ...]:
+
+def _flags(value: int, flag_type: type[enum.IntFlag]) -> tuple[str, ...]:
     return tuple(str(flag.name) for flag in flag_type if value & flag)
 
 
-class _BusDriver:
-    framing: Framing
+class BusDriver(abc.ABC):
+    """A ServoDriver over one SerialBus; a subclass per protocol family says the packets.
+
+    Every call runs on the event loop and awaits the bus thread. A servo that
+    does not answer, or whose every reply is corrupt, raises ServoSilent naming
+    it; a lost adapter raises PortUnavailable.
+    """
+
+    framing: Framing  # how the protocol's replies are cut out of the byte stream
 
     def __init__(self, bus: SerialBus) -> None:
+        """Drive the servos on `bus`; the bus is started and closed with the driver."""
         self.bus = bus
 
     async def _each(self, ids: Sequence[int], exchanges: list[Exchange]) -> list[Any]:
@@ -48,17 +60,44 @@ class _BusDriver:
         return outcomes
 
     async def start(self) -> None:
+        """Start the bus thread; returns within a second even while the port is away."""
         await self.bus.start()
 
     async def close(self) -> None:
+        """Stop the bus thread and release the port."""
         await self.bus.close()
 
     def retried(self) -> int:
+        """Replies this bus has retried so far (corrupt or late, then good)."""
         return self.bus.stats.retries
 
+    @abc.abstractmethod
+    async def ping(self, servo_id: int) -> int | None:
+        """The model number of a servo that answers (0 if the protocol has none); None if silent."""
+
+    @abc.abstractmethod
+    async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        """Present raw positions; ServoSilent names the first servo that did not answer."""
+
+    @abc.abstractmethod
+    async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        """Raw goal and speed limit (deg/s) per servo, reached within `step` seconds."""
+
+    @abc.abstractmethod
+    async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        """Torque on or off for every servo in `ids`, in as few packets as the protocol allows."""
+
+    @abc.abstractmethod
+    async def read_health(self, servo_id: int) -> Health:
+        """One servo's condition; `kind` set when its error bits mean a fault."""
+
+    @abc.abstractmethod
+    async def reset_errors(self, ids: Sequence[int]) -> None:
+        """Clear the servos' own latched error state, where the protocol latches one."""
+
     async def _ask(
-        self, servo_id: int, request: bytes, decode: Callable[[list[bytes]], Any], expect: int
-    ) -> Any:
+        self, servo_id: int, request: bytes, decode: Callable[[list[bytes]], T], expect: int
+    ) -> T:
         try:
             return await self.bus.transact(request, 1, self.framing, decode, expect)
         except (BusTimeout, CodecError) as error:
@@ -67,7 +106,9 @@ class _BusDriver:
             raise ServoSilent(servo_id, message) from None
 
 
-class Dynamixel1Driver(_BusDriver):
+class Dynamixel1Driver(BusDriver):
+    """AX-12A servos on Dynamixel Protocol 1.0."""
+
     framing = Framing(dx1.HEAD_SIZE, dx1.packet_length)
 
     def _status(self, servo_id: int, length: int) -> Callable[[list[bytes]], dx1.Status]:
@@ -87,6 +128,7 @@ class Dynamixel1Driver(_BusDriver):
         return await self._ask(servo_id, request, self._status(servo_id, length), 6 + length)
 
     async def ping(self, servo_id: int) -> int | None:
+        """PING, then READ of the model number; None when either goes unanswered."""
         try:
             await self._ask(servo_id, dx1.ping(servo_id), self._status(servo_id, 0), 6)
             status = await self._read(servo_id, dx1.AX12.MODEL_NUMBER, 2)
@@ -95,6 +137,7 @@ class Dynamixel1Driver(_BusDriver):
         return dx1.u16(status.params)
 
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        """One READ per servo (the AX-12A has no SYNC_READ), all in one hand-off."""
         # The AX-12A has neither SYNC_READ nor BULK_READ: one READ per servo, all
         # handed to the bus thread at once.
         exchanges = [
@@ -106,6 +149,7 @@ class Dynamixel1Driver(_BusDriver):
         return {i: dx1.u16(status.params) for i, status in zip(ids, outcomes, strict=True)}
 
     async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        """One SYNC_WRITE of goal and moving speed; speed never 0, which means "no limit"."""
         data = {}
         for servo_id, (raw, speed_dps) in goals.items():
             # Moving speed 0 means "as fast as possible": never send it.
@@ -114,13 +158,16 @@ class Dynamixel1Driver(_BusDriver):
         await self.bus.transact(dx1.sync_write(dx1.AX12.GOAL_POSITION, 4, data))
 
     async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        """One SYNC_WRITE of TORQUE_ENABLE."""
         data = {servo_id: bytes((int(on),)) for servo_id in ids}
         await self.bus.transact(dx1.sync_write(dx1.AX12.TORQUE_ENABLE, 1, data))
 
     async def reset_errors(self, ids: Sequence[int]) -> None:
+        """Nothing to send: AX-12A error bits clear when their condition ends."""
         return None  # AX-12A error bits clear themselves once the condition has gone
 
     async def read_health(self, servo_id: int) -> Health:
+        """One READ of position, speed, load, voltage, temperature; fault from the error byte."""
         status = await self._read(servo_id, dx1.AX12.PRESENT_POSITION, 8)
         params, error = status.params, status.error
         load_raw = dx1.u16(params, 4)
@@ -142,7 +189,9 @@ class Dynamixel1Driver(_BusDriver):
         )
 
 
-class Dynamixel2Driver(_BusDriver):
+class Dynamixel2Driver(BusDriver):
+    """X series servos (XL430) on Dynamixel Protocol 2.0."""
+
     framing = Framing(dx2.HEAD_SIZE, dx2.packet_length)
 
     def _status(self, servo_id: int, length: int) -> Callable[[list[bytes]], dx2.Status]:
@@ -159,6 +208,7 @@ class Dynamixel2Driver(_BusDriver):
         return await self._ask(servo_id, request, self._status(servo_id, length), 11 + length)
 
     async def ping(self, servo_id: int) -> int | None:
+        """PING; the model number is in its reply."""
         try:
             status = await self._ask(servo_id, dx2.ping(servo_id), self._status(servo_id, 3), 14)
         except ServoSilent:
@@ -166,6 +216,7 @@ class Dynamixel2Driver(_BusDriver):
         return dx2.u16(status.params)
 
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        """One SYNC_READ; if a servo is silent, a READ each to name which one."""
         ids = list(ids)
 
         def decode(packets: list[bytes]) -> dict[int, int]:
@@ -190,19 +241,23 @@ class Dynamixel2Driver(_BusDriver):
         return positions
 
     async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        """One SYNC_WRITE of goal positions (speed is left to the profile)."""
         data = {servo_id: dx2.le32(raw) for servo_id, (raw, _speed) in goals.items()}
         await self.bus.transact(dx2.sync_write(dx2.XSeries.GOAL_POSITION, 4, data))
 
     async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        """One SYNC_WRITE of TORQUE_ENABLE."""
         data = {servo_id: bytes((int(on),)) for servo_id in ids}
         await self.bus.transact(dx2.sync_write(dx2.XSeries.TORQUE_ENABLE, 1, data))
 
     async def reset_errors(self, ids: Sequence[int]) -> None:
+        """REBOOT each servo: an X series keeps Hardware Error Status until then (torque off)."""
         # An X series servo keeps its Hardware Error Status until rebooted (torque stays off).
         for servo_id in ids:
             await self._ask(servo_id, dx2.reboot(servo_id), self._status(servo_id, 0), 11)
 
     async def read_health(self, servo_id: int) -> Health:
+        """READ from load to temperature; Hardware Error Status too if the alert bit is set."""
         start = dx2.XSeries.PRESENT_LOAD
         length = dx2.XSeries.PRESENT_TEMPERATURE + 1 - start
         status = await self._read(servo_id, start, length)
@@ -221,18 +276,19 @@ class Dynamixel2Driver(_BusDriver):
         elif hardware:
             kind = FaultKind.HARDWARE
         load = int.from_bytes(params[0:2], "little", signed=True) / 1000
-        offset = lambda address: address - start  # noqa: E731
         return Health(
-            position=dx2.s32(params, offset(dx2.XSeries.PRESENT_POSITION)),
-            temperature_c=float(params[offset(dx2.XSeries.PRESENT_TEMPERATURE)]),
-            voltage_v=dx2.u16(params, offset(dx2.XSeries.PRESENT_INPUT_VOLTAGE)) / 10,
+            position=dx2.s32(params, dx2.XSeries.PRESENT_POSITION - start),
+            temperature_c=float(params[dx2.XSeries.PRESENT_TEMPERATURE - start]),
+            voltage_v=dx2.u16(params, dx2.XSeries.PRESENT_INPUT_VOLTAGE - start) / 10,
             load=load,
             flags=_flags(hardware, dx2.HardwareError),
             kind=kind,
         )
 
 
-class HerkulexDriver(_BusDriver):
+class HerkulexDriver(BusDriver):
+    """HerkuleX DRS-0101 servos with the factory ACK policy (only reads are answered)."""
+
     framing = Framing(hx.HEAD_SIZE, hx.packet_length)
 
     def _ack(self, servo_id: int, command: hx.Command) -> Callable[[list[bytes]], hx.Ack]:
@@ -255,6 +311,7 @@ class HerkulexDriver(_BusDriver):
         return reply
 
     async def ping(self, servo_id: int) -> int | None:
+        """EEP_READ of the model number; None when unanswered."""
         try:
             request = hx.eep_read(servo_id, hx.Eep.MODEL_NO_1, 2)
             reply = await self._ask(servo_id, request, self._ack(servo_id, hx.Command.EEP_READ), 13)
@@ -264,6 +321,7 @@ class HerkulexDriver(_BusDriver):
         return value[0] << 8 | value[1] if len(value) == 2 else None
 
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        """One RAM_READ of the calibrated position per servo, all in one hand-off."""
         # HerkuleX has no group read: one RAM_READ per servo, handed over at once.
         address = hx.Ram.CALIBRATED_POSITION
         exchanges = [
@@ -288,22 +346,26 @@ class HerkulexDriver(_BusDriver):
         return decode
 
     async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        """One S_JOG with the play time of one control step (1 to 255 units of 11.2 ms)."""
         playtime = min(255, max(1, round(step / hx.PLAYTIME_SECONDS)))
         moves = [(servo_id, raw, 0) for servo_id, (raw, _speed) in goals.items()]
         await self.bus.transact(hx.s_jog(playtime, moves))
 
     async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        """RAM_WRITE of TORQUE_CONTROL per servo in one write; unanswered, as writes are."""
         value = bytes((hx.TorqueControl.ON if on else hx.TorqueControl.FREE,))
         # With the factory ACK policy (reads only) writes are not answered: one write for all.
         request = b"".join(hx.ram_write(i, hx.Ram.TORQUE_CONTROL, value) for i in ids)
         await self.bus.transact(request)
 
     async def reset_errors(self, ids: Sequence[int]) -> None:
+        """RAM_WRITE of zero to STATUS_ERROR: a HerkuleX latches it until then."""
         # A HerkuleX latches its status error until it is written back to zero.
         zero = bytes((0, 0))
         await self.bus.transact(b"".join(hx.ram_write(i, hx.Ram.STATUS_ERROR, zero) for i in ids))
 
     async def read_health(self, servo_id: int) -> Health:
+        """RAM_READ of the voltage; fault from the reply's status error byte."""
         reply = await self._ram_read(servo_id, hx.Ram.VOLTAGE, 1)
         error = reply.status_error
         kind = None
@@ -322,10 +384,13 @@ class HerkulexDriver(_BusDriver):
         )
 
 
-class MaestroDriver(_BusDriver):
+class MaestroDriver(BusDriver):
+    """Hobby servos on a Pololu Maestro's channels (compact protocol); ids are channels."""
+
     framing = Framing(2, lambda head: 2)
 
     async def ping(self, servo_id: int) -> int | None:
+        """Get Errors; 0 (a Maestro has no model number), or None when unanswered."""
         try:
             await self._ask(servo_id, mo.get_errors(), lambda p: mo.decode_errors(p[0]), 2)
         except ServoSilent:
@@ -333,6 +398,7 @@ class MaestroDriver(_BusDriver):
         return 0
 
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        """Every Get Position in one write; a silent Maestro names the first channel."""
         ids = list(ids)
         # Every Get Position in one write; the replies come back in order, 2 bytes each.
         request = b"".join(mo.get_position(channel) for channel in ids)
@@ -346,6 +412,7 @@ class MaestroDriver(_BusDriver):
             raise ServoSilent(ids[0], f"maestro on bus {self.bus.name} did not answer") from None
 
     async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        """Set Multiple Targets per run of consecutive channels, Set Target otherwise."""
         await self.bus.transact(self._targets({c: raw for c, (raw, _) in goals.items()}))
 
     @staticmethod
@@ -367,22 +434,25 @@ class MaestroDriver(_BusDriver):
         return out
 
     async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        """Target 0 stops a channel's pulses (limp); on needs no packet, the next goal does."""
         # A hobby servo has no torque switch: target 0 stops its pulses (limp). Turning
         # it back on is the next goal write, which the joints layer makes the present position.
         if not on:
             await self.bus.transact(self._targets(dict.fromkeys(ids, 0)))
 
     async def reset_errors(self, ids: Sequence[int]) -> None:
+        """Get Errors, which also clears the Maestro's error register."""
         await self._ask(ids[0] if ids else 0, mo.get_errors(), lambda p: mo.decode_errors(p[0]), 2)
 
     async def read_health(self, servo_id: int) -> Health:
+        """Get Errors as flags only: they are the Maestro's link and script, not a servo."""
         errors = await self._ask(servo_id, mo.get_errors(), lambda p: mo.decode_errors(p[0]), 2)
         # The Maestro's errors are about its serial link and script, not a servo: report them
         # as flags without latching a fault.
         return Health(flags=_flags(errors, mo.Errors))
 
 
-DRIVERS: dict[str, type[_BusDriver]] = {
+DRIVERS: dict[str, type[BusDriver]] = {
     "dynamixel1": Dynamixel1Driver,
     "dynamixel2": Dynamixel2Driver,
     "herkulex": HerkulexDriver,
@@ -390,7 +460,8 @@ DRIVERS: dict[str, type[_BusDriver]] = {
 }
 
 
-def driver_for(settings: BusSettings) -> _BusDriver:
+def driver_for(settings: BusSettings) -> BusDriver:
+    """The driver of the bus's protocol over a new SerialBus (not started) on its port."""
     bus = SerialBus(
         settings.name,
         settings.port,

@@ -23,6 +23,8 @@ class DynamixelError(CodecError):
 
 
 class Instruction(enum.IntEnum):
+    """Instruction codes of Protocol 1.0."""
+
     PING = 0x01
     READ = 0x02
     WRITE = 0x03
@@ -93,12 +95,15 @@ class Packet:
 
 @dataclass(frozen=True, slots=True)
 class Status:
+    """A decoded status packet: who answered, its error bits and the data read."""
+
     servo_id: int
     error: ErrorBits
     params: bytes
 
 
 def checksum(body: bytes) -> int:
+    """The inverted low byte of the sum of ID, LENGTH, INSTRUCTION and PARAMS."""
     return ~sum(body) & 0xFF
 
 
@@ -114,6 +119,7 @@ def _check_byte(name: str, value: int) -> None:
 
 
 def instruction(servo_id: int, instruction: int, params: bytes = b"") -> bytes:
+    """A whole packet to `servo_id` (or BROADCAST_ID); DynamixelError if a field does not fit."""
     _check_id(servo_id, broadcast=True)
     _check_byte("instruction", instruction)
     length = len(params) + 2
@@ -124,30 +130,36 @@ def instruction(servo_id: int, instruction: int, params: bytes = b"") -> bytes:
 
 
 def ping(servo_id: int) -> bytes:
+    """PING: the servo answers with an empty status packet."""
     return instruction(servo_id, Instruction.PING)
 
 
 def read(servo_id: int, address: int, length: int) -> bytes:
+    """READ `length` bytes of the control table from `address`."""
     _check_byte("address", address)
     _check_byte("length", length)
     return instruction(servo_id, Instruction.READ, bytes((address, length)))
 
 
 def write(servo_id: int, address: int, data: bytes) -> bytes:
+    """WRITE `data` into the control table at `address`, at once."""
     _check_byte("address", address)
     return instruction(servo_id, Instruction.WRITE, bytes((address,)) + data)
 
 
 def reg_write(servo_id: int, address: int, data: bytes) -> bytes:
+    """REG_WRITE: like WRITE, but held until ACTION."""
     _check_byte("address", address)
     return instruction(servo_id, Instruction.REG_WRITE, bytes((address,)) + data)
 
 
 def action(servo_id: int = BROADCAST_ID) -> bytes:
+    """ACTION: carry out the writes held by REG_WRITE (every servo by default)."""
     return instruction(servo_id, Instruction.ACTION)
 
 
 def reset(servo_id: int) -> bytes:
+    """RESET the control table to the factory values (id 1, 1 Mbps): never sent by the HAL."""
     return instruction(servo_id, Instruction.RESET)
 
 
@@ -203,6 +215,7 @@ def _unframe(packet: bytes) -> tuple[int, int, bytes]:
 
 
 def decode_status(packet: bytes) -> Status:
+    """A servo's status packet; DynamixelError for a bad frame, checksum, id or error byte."""
     servo_id, error, params = _unframe(packet)
     if servo_id > MAX_ID:
         raise DynamixelError(f"status packet from the broadcast id {servo_id}")
@@ -212,15 +225,18 @@ def decode_status(packet: bytes) -> Status:
 
 
 def decode_instruction(packet: bytes) -> Packet:
+    """An instruction packet as a servo reads it (emulators and round-trip tests)."""
     servo_id, instruction_code, params = _unframe(packet)
     return Packet(servo_id, instruction_code, params)
 
 
 def u16(data: bytes, offset: int = 0) -> int:
+    """The little-endian unsigned 16-bit value at `offset`."""
     return data[offset] | data[offset + 1] << 8
 
 
 def le16(value: int) -> bytes:
+    """Two little-endian bytes; DynamixelError outside 0..65535."""
     if not 0 <= value <= 0xFFFF:
         raise DynamixelError(f"{value} does not fit in two bytes")
     return bytes((value & 0xFF, value >> 8))

@@ -12,9 +12,8 @@ import enum
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
-from hal.servos.dynamixel1 import DynamixelError
-
-__all__ = ["DynamixelError"]
+# The same error class for both protocol versions, re-exported for dx2.DynamixelError.
+from hal.servos.dynamixel1 import DynamixelError as DynamixelError
 
 HEADER = b"\xff\xff\xfd\x00"
 BROADCAST_ID = 0xFE
@@ -24,6 +23,8 @@ STATUS = 0x55
 
 
 class Instruction(enum.IntEnum):
+    """Instruction codes of Protocol 2.0."""
+
     PING = 0x01
     READ = 0x02
     WRITE = 0x03
@@ -108,6 +109,7 @@ _CRC_TABLE = _crc_table()
 
 
 def crc16(data: bytes) -> int:
+    """CRC-16 of `data` (polynomial 0x8005, initial 0, not reflected), as ROBOTIS specifies."""
     crc = 0
     for byte in data:
         crc = ((crc << 8) ^ _CRC_TABLE[((crc >> 8) ^ byte) & 0xFF]) & 0xFFFF
@@ -115,6 +117,7 @@ def crc16(data: bytes) -> int:
 
 
 def stuff(payload: bytes) -> bytes:
+    """Add an FD after every FF FF FD in INST+PARAMS, so no header appears inside a packet."""
     out = bytearray()
     for byte in payload:
         out.append(byte)
@@ -124,6 +127,7 @@ def stuff(payload: bytes) -> bytes:
 
 
 def unstuff(payload: bytes) -> bytes:
+    """Remove the FD that stuff() added after each FF FF FD."""
     out = bytearray()
     index = 0
     while index < len(payload):
@@ -136,6 +140,8 @@ def unstuff(payload: bytes) -> bytes:
 
 @dataclass(frozen=True, slots=True)
 class Packet:
+    """An instruction packet, decoded and unstuffed (the emulators and round-trip tests use it)."""
+
     servo_id: int
     instruction: int
     params: bytes
@@ -143,6 +149,8 @@ class Packet:
 
 @dataclass(frozen=True, slots=True)
 class Status:
+    """A decoded status packet: who answered, its error number, the alert bit, the data read."""
+
     servo_id: int
     error: ErrorNumber
     alert: bool
@@ -155,6 +163,7 @@ def _check(name: str, value: int, highest: int) -> None:
 
 
 def le16(value: int) -> bytes:
+    """Two little-endian bytes; DynamixelError outside 0..65535."""
     _check("value", value, 0xFFFF)
     return value.to_bytes(2, "little")
 
@@ -167,14 +176,17 @@ def le32(value: int) -> bytes:
 
 
 def u16(data: bytes, offset: int = 0) -> int:
+    """The little-endian unsigned 16-bit value at `offset`."""
     return int.from_bytes(data[offset : offset + 2], "little")
 
 
 def s32(data: bytes, offset: int = 0) -> int:
+    """The little-endian signed 32-bit value at `offset` (positions, velocities)."""
     return int.from_bytes(data[offset : offset + 4], "little", signed=True)
 
 
 def instruction(servo_id: int, instruction: int, params: bytes = b"") -> bytes:
+    """A whole packet, stuffed and with its CRC; DynamixelError if a field does not fit."""
     _check("servo id", servo_id, BROADCAST_ID)
     _check("instruction", instruction, 0xFF)
     body = stuff(bytes((instruction,)) + params)
@@ -185,22 +197,27 @@ def instruction(servo_id: int, instruction: int, params: bytes = b"") -> bytes:
 
 
 def ping(servo_id: int) -> bytes:
+    """PING: the reply carries the model number and firmware version."""
     return instruction(servo_id, Instruction.PING)
 
 
 def read(servo_id: int, address: int, length: int) -> bytes:
+    """READ `length` bytes of the control table from `address`."""
     return instruction(servo_id, Instruction.READ, le16(address) + le16(length))
 
 
 def write(servo_id: int, address: int, data: bytes) -> bytes:
+    """WRITE `data` into the control table at `address`."""
     return instruction(servo_id, Instruction.WRITE, le16(address) + data)
 
 
 def reboot(servo_id: int) -> bytes:
+    """REBOOT: clears Hardware Error Status; the servo comes back with torque off."""
     return instruction(servo_id, Instruction.REBOOT)
 
 
 def sync_read(address: int, length: int, servo_ids: Iterable[int]) -> bytes:
+    """SYNC_READ: each servo answers in turn with `length` bytes from `address`."""
     ids = bytes(servo_ids)
     for servo_id in ids:
         _check("servo id", servo_id, MAX_ID)
@@ -208,6 +225,7 @@ def sync_read(address: int, length: int, servo_ids: Iterable[int]) -> bytes:
 
 
 def sync_write(address: int, length: int, data: Mapping[int, bytes]) -> bytes:
+    """One packet that writes `length` bytes at `address` on every servo in `data`."""
     params = bytearray(le16(address) + le16(length))
     for servo_id, values in data.items():
         _check("servo id", servo_id, MAX_ID)
@@ -219,6 +237,7 @@ def sync_write(address: int, length: int, data: Mapping[int, bytes]) -> bytes:
 
 
 def bulk_read(items: Sequence[tuple[int, int, int]]) -> bytes:
+    """BULK_READ of (id, address, length) items, each servo its own range."""
     params = bytearray()
     for servo_id, address, length in items:
         _check("servo id", servo_id, MAX_ID)
@@ -227,6 +246,7 @@ def bulk_read(items: Sequence[tuple[int, int, int]]) -> bytes:
 
 
 def bulk_write(items: Sequence[tuple[int, int, bytes]]) -> bytes:
+    """BULK_WRITE of (id, address, data) items, each servo its own range."""
     params = bytearray()
     for servo_id, address, data in items:
         _check("servo id", servo_id, MAX_ID)
@@ -241,6 +261,7 @@ def status(servo_id: int, error: int = 0, params: bytes = b"") -> bytes:
 
 
 def packet_length(head: bytes) -> int:
+    """Total length of the packet whose first HEAD_SIZE bytes are `head`; DynamixelError if bad."""
     if len(head) < HEAD_SIZE or head[:4] != HEADER:
         raise DynamixelError(f"not a Protocol 2.0 header: {head[:HEAD_SIZE].hex(' ')}")
     length = u16(head, 5)
@@ -262,6 +283,7 @@ def _unframe(packet: bytes) -> tuple[int, int, bytes]:
 
 
 def decode_status(packet: bytes) -> Status:
+    """A servo's status packet; DynamixelError for a bad frame, CRC, id or error number."""
     servo_id, instruction_code, params = _unframe(packet)
     if instruction_code != STATUS:
         raise DynamixelError(f"instruction {instruction_code:#04x} where a status (0x55) was due")
@@ -277,5 +299,6 @@ def decode_status(packet: bytes) -> Status:
 
 
 def decode_instruction(packet: bytes) -> Packet:
+    """An instruction packet as a servo reads it (emulators and round-trip tests)."""
     servo_id, instruction_code, params = _unframe(packet)
     return Packet(servo_id, instruction_code, params)

@@ -29,6 +29,8 @@ class HerkulexError(CodecError):
 
 
 class Command(enum.IntEnum):
+    """Command codes; a reply carries the command | ACK_FLAG."""
+
     EEP_WRITE = 0x01
     EEP_READ = 0x02
     RAM_WRITE = 0x03
@@ -69,6 +71,8 @@ class Ram(enum.IntEnum):
 
 
 class Eep(enum.IntEnum):
+    """Non-volatile register map addresses (DRS-0101), the few the HAL reads."""
+
     MODEL_NO_1 = 0
     MODEL_NO_2 = 1
     VERSION_1 = 2
@@ -79,18 +83,24 @@ class Eep(enum.IntEnum):
 
 
 class TorqueControl(enum.IntEnum):
+    """Values of the TORQUE_CONTROL register: free (limp), brake, or on."""
+
     FREE = 0x00
     BRAKE = 0x40
     ON = 0x60
 
 
 class AckPolicy(enum.IntEnum):
+    """Which commands a servo answers; the HAL assumes the factory READS_ONLY."""
+
     NEVER = 0
     READS_ONLY = 1  # the factory default: only RAM/EEP_READ and STAT answer
     ALWAYS = 2
 
 
 class StatusError(enum.IntFlag):
+    """The status error byte of every reply; the servo latches it until written to zero."""
+
     EXCEED_INPUT_VOLTAGE = 0x01
     EXCEED_POT_LIMIT = 0x02
     EXCEED_TEMPERATURE = 0x04
@@ -101,6 +111,8 @@ class StatusError(enum.IntFlag):
 
 
 class StatusDetail(enum.IntFlag):
+    """The status detail byte of every reply."""
+
     MOVING = 0x01
     INPOSITION = 0x02
     CHECKSUM_ERROR = 0x04
@@ -123,6 +135,8 @@ class JogSet(enum.IntFlag):
 
 @dataclass(frozen=True, slots=True)
 class Packet:
+    """A packet with its checksums verified, any command (the emulator reads requests so)."""
+
     servo_id: int
     command: int
     data: bytes
@@ -130,6 +144,8 @@ class Packet:
 
 @dataclass(frozen=True, slots=True)
 class Ack:
+    """A servo's reply, decoded: the command answered, its data and the two status bytes."""
+
     servo_id: int
     command: Command
     data: bytes  # between the checksums and the two status bytes
@@ -144,6 +160,7 @@ class Ack:
 
 
 def checksums(size: int, servo_id: int, command: int, data: bytes) -> tuple[int, int]:
+    """(CS1, CS2): the XOR of SIZE, ID, CMD and DATA with bit 0 cleared, and its complement."""
     cs1 = size ^ servo_id ^ command
     for byte in data:
         cs1 ^= byte
@@ -157,6 +174,7 @@ def _check(name: str, value: int, highest: int) -> None:
 
 
 def packet(servo_id: int, command: int, data: bytes = b"") -> bytes:
+    """A whole packet with its size and checksums; HerkulexError if a field does not fit."""
     _check("servo id", servo_id, BROADCAST_ID)
     _check("command", command, 0xFF)
     size = MIN_SIZE + len(data)
@@ -179,30 +197,37 @@ def _write(command: Command, servo_id: int, address: int, data: bytes) -> bytes:
 
 
 def ram_read(servo_id: int, address: int, length: int) -> bytes:
+    """RAM_READ `length` bytes from `address` of the volatile registers."""
     return _read(Command.RAM_READ, servo_id, address, length)
 
 
 def ram_write(servo_id: int, address: int, data: bytes) -> bytes:
+    """RAM_WRITE `data` at `address` of the volatile registers (unanswered by default)."""
     return _write(Command.RAM_WRITE, servo_id, address, data)
 
 
 def eep_read(servo_id: int, address: int, length: int) -> bytes:
+    """EEP_READ `length` bytes from `address` of the non-volatile registers."""
     return _read(Command.EEP_READ, servo_id, address, length)
 
 
 def eep_write(servo_id: int, address: int, data: bytes) -> bytes:
+    """EEP_WRITE `data` at `address` of the non-volatile registers: never sent by the HAL."""
     return _write(Command.EEP_WRITE, servo_id, address, data)
 
 
 def stat(servo_id: int) -> bytes:
+    """STAT: the reply is only the two status bytes."""
     return packet(servo_id, Command.STAT)
 
 
 def reboot(servo_id: int) -> bytes:
+    """REBOOT the servo."""
     return packet(servo_id, Command.REBOOT)
 
 
 def rollback(servo_id: int, keep_id: bool = True, keep_baud: bool = True) -> bytes:
+    """ROLLBACK to factory settings (keeping id and baud by default): never sent by the HAL."""
     return packet(servo_id, Command.ROLLBACK, bytes((int(keep_id), int(keep_baud))))
 
 
@@ -240,6 +265,7 @@ def ack(servo_id: int, command: int, data: bytes, status_error: int, status_deta
 
 
 def packet_length(head: bytes) -> int:
+    """Total length of the packet whose first HEAD_SIZE bytes are `head`; HerkulexError if bad."""
     if len(head) < HEAD_SIZE or head[:2] != HEADER:
         raise HerkulexError(f"not a HerkuleX header: {head[:HEAD_SIZE].hex(' ')}")
     if not MIN_SIZE <= head[2] <= MAX_SIZE:
@@ -248,6 +274,7 @@ def packet_length(head: bytes) -> int:
 
 
 def decode_packet(raw: bytes) -> Packet:
+    """Any packet, its size and checksums verified; HerkulexError otherwise."""
     size = packet_length(raw)
     if len(raw) != size:
         raise HerkulexError(f"packet of {len(raw)} bytes, its size byte says {size}")
@@ -261,6 +288,7 @@ def decode_packet(raw: bytes) -> Packet:
 
 
 def decode_ack(raw: bytes) -> Ack:
+    """A reply to a known command; HerkulexError for a request, an unknown command or no status."""
     decoded = decode_packet(raw)
     if not decoded.command & ACK_FLAG:
         raise HerkulexError(f"command {decoded.command:#04x} is not a reply")
@@ -280,9 +308,11 @@ def decode_ack(raw: bytes) -> Ack:
 
 
 def u16(data: bytes, offset: int = 0) -> int:
+    """The little-endian unsigned 16-bit value at `offset`."""
     return data[offset] | data[offset + 1] << 8
 
 
 def le16(value: int) -> bytes:
+    """Two little-endian bytes; HerkulexError outside 0..65535."""
     _check("value", value, 0xFFFF)
     return bytes((value & 0xFF, value >> 8))

@@ -31,6 +31,7 @@ from hal.errors import (
     RepeatFilter,
     ServoFaultError,
     ServoSilent,
+    UnknownJoint,
     UnsafeCommand,
 )
 from hal.servos.api import Fault, FaultKind, JointStatus, Pose, ServoDriver
@@ -89,6 +90,11 @@ class Joints:
         drivers: Mapping[str, ServoDriver],
         clock: Clock,
     ) -> None:
+        """The joints of `settings` over `drivers` (bus name -> driver), timed by `clock`.
+
+        Nothing is opened or read until start(); every method is called from the
+        event loop that start() ran on.
+        """
         self.settings = settings
         self.clock = clock
         self._drivers = dict(drivers)
@@ -105,6 +111,7 @@ class Joints:
 
     @classmethod
     def from_settings(cls, settings: ServoSettings, clock: Clock) -> Joints:
+        """The real joints: a bus driver per configured bus (not started)."""
         from hal.servos.drivers import driver_for
 
         return cls(settings, {bus.name: driver_for(bus) for bus in settings.buses}, clock)
@@ -113,14 +120,17 @@ class Joints:
 
     @property
     def joints(self) -> tuple[str, ...]:
+        """Every configured joint name, in configuration order."""
         return tuple(self._joints)
 
     @property
     def groups(self) -> Mapping[str, tuple[str, ...]]:
+        """Group name -> its joints."""
         return self._groups
 
     @property
     def faults(self) -> tuple[Fault, ...]:
+        """The latched faults, oldest first; empty when all is well."""
         return tuple(self._faults)
 
     def on_fault(self, listener: Callable[[Fault], None]) -> None:
@@ -128,6 +138,7 @@ class Joints:
         self._fault_listeners.append(listener)
 
     def off_fault(self, listener: Callable[[Fault], None]) -> None:
+        """Stop calling a listener given to on_fault; an unknown one is ignored."""
         with contextlib.suppress(ValueError):
             self._fault_listeners.remove(listener)
 
@@ -161,6 +172,7 @@ class Joints:
             self._poll_task = asyncio.create_task(self._poll_forever(), name="servo health poll")
 
     async def close(self) -> None:
+        """Stop the health poll and close the buses; torque is left as it is (no slump)."""
         if self._poll_task is not None:
             self._poll_task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -170,6 +182,11 @@ class Joints:
             await driver.close()
 
     async def read_positions(self, group: str | None = None) -> dict[str, float]:
+        """Present positions in degrees of a group's (or one joint's) joints; all if None.
+
+        Raises UnknownJoint for an unknown name, and ServoFaultError when a servo
+        is silent or the bus is lost (the fault is latched).
+        """
         selected = [self._joints[name] for name in self._select(group)]
         await self._read_present(selected)
         return {j.name: j.present for j in selected if j.present is not None}
@@ -177,9 +194,14 @@ class Joints:
     async def move(
         self, pose: Pose, duration: float | None = None, speed: float | None = None
     ) -> None:
+        """Move the joints in `pose` together, within their ranges and speed limits.
+
+        See ServoApi.move: clamped targets are logged, and the profile takes at least
+        `duration` seconds. Raises UnknownJoint, UnsafeCommand or ServoFaultError.
+        """
         unknown = [name for name in pose if name not in self._joints]
         if unknown:
-            raise KeyError(f"unknown joints: {', '.join(unknown)}")
+            raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
         if duration is not None and not (duration >= 0 and math.isfinite(duration)):
             raise UnsafeCommand(f"duration must be a finite number >= 0, found {duration}")
         if speed is not None and not (speed > 0 and math.isfinite(speed)):
@@ -198,6 +220,11 @@ class Joints:
             await self._run_profile(joints, targets, duration, speed)
 
     async def set_compliant(self, group: str, compliant: bool) -> None:
+        """Torque off for `group` (or one joint), or back on holding where each joint is.
+
+        Raises UnknownJoint for an unknown name; turning on raises ServoFaultError
+        while a fault is latched and UnsafeCommand for a joint outside its range.
+        """
         joints = [self._joints[name] for name in self._select(group)]
         async with self._motion:
             if compliant:
@@ -250,6 +277,11 @@ class Joints:
         await self._torque(joints, True)
 
     async def clear_faults(self) -> None:
+        """Reset the faulty servos' error state and forget every latched fault.
+
+        A reset that fails is logged, not raised: the next poll latches the fault
+        again if it persists.
+        """
         faulty = [self._joints[f.joint] for f in self._faults if f.joint in self._joints]
         for driver, members in self._by_driver(faulty).items():
             try:
@@ -361,7 +393,7 @@ class Joints:
             return list(self._groups[group])
         if group in self._joints:
             return [group]
-        raise KeyError(f"unknown group or joint {group!r}")
+        raise UnknownJoint(f"unknown group or joint {group!r}")
 
     def _by_driver(self, joints: Iterable[_Joint | str]) -> dict[ServoDriver, list[_Joint]]:
         grouped: dict[ServoDriver, list[_Joint]] = {}

@@ -22,6 +22,8 @@ class MaestroError(CodecError):
 
 
 class Command(enum.IntEnum):
+    """Command bytes of the compact protocol."""
+
     SET_TARGET = 0x84
     SET_SPEED = 0x87
     SET_ACCELERATION = 0x89
@@ -33,6 +35,8 @@ class Command(enum.IntEnum):
 
 
 class Errors(enum.IntFlag):
+    """The Maestro's error register (Get Errors): its serial link and script, not a servo."""
+
     SERIAL_SIGNAL = 1 << 0
     SERIAL_OVERRUN = 1 << 1
     SERIAL_RX_BUFFER_FULL = 1 << 2
@@ -80,6 +84,7 @@ def set_speed(channel: int, speed: int) -> bytes:
 
 
 def set_acceleration(channel: int, acceleration: int) -> bytes:
+    """Acceleration limit 0 to 255 (0 is unlimited); MaestroError outside it."""
     if not 0 <= acceleration <= 255:
         raise MaestroError(f"acceleration {acceleration} outside 0..255")
     return bytes((Command.SET_ACCELERATION, _channel(channel))) + _value14(acceleration)
@@ -96,18 +101,22 @@ def set_multiple_targets(first_channel: int, targets: Sequence[int]) -> bytes:
 
 
 def get_position(channel: int) -> bytes:
+    """Get Position: the reply is the channel's present pulse width (or input), 2 bytes."""
     return bytes((Command.GET_POSITION, _channel(channel)))
 
 
 def get_moving_state() -> bytes:
+    """Get Moving State: the reply is 1 byte, 1 while any servo is still moving."""
     return bytes((Command.GET_MOVING_STATE,))
 
 
 def get_errors() -> bytes:
+    """Get Errors: the reply is the error register, 2 bytes; reading it clears it."""
     return bytes((Command.GET_ERRORS,))
 
 
 def go_home() -> bytes:
+    """Go Home: every channel to its configured home position (or limp)."""
     return bytes((Command.GO_HOME,))
 
 
@@ -158,6 +167,7 @@ def decode_position(reply: bytes) -> int:
 
 
 def decode_errors(reply: bytes) -> Errors:
+    """The Get Errors reply; MaestroError for a wrong length or undefined bits."""
     if len(reply) != 2:
         raise MaestroError(f"errors reply of {len(reply)} bytes, expected 2")
     value = reply[0] | reply[1] << 8
@@ -167,6 +177,7 @@ def decode_errors(reply: bytes) -> Errors:
 
 
 def decode_moving_state(reply: bytes) -> bool:
+    """The Get Moving State reply; MaestroError unless it is 00 or 01."""
     if len(reply) != 1 or reply[0] > 1:
         raise MaestroError(f"moving-state reply {reply.hex(' ')} is not 00 or 01")
     return reply[0] == 1

@@ -4,21 +4,47 @@ A joint's angle in degrees is measured from its servo's centre:
     degrees = direction * (raw - centre) * degrees_per_unit + offset_deg
 so `offset_deg` is the joint's angle when the servo sits at its centre, and
 `direction = -1` mirrors a servo mounted the other way round (a left arm).
+
+Validation: a key's own limits are on its field (a Literal, or msgspec.Meta,
+which msgspec holds while decoding and kasparctl.config words as "expected
+X, found Y" from the Meta: its bounds, and `extra` "unit" or "expected").
+Rules that tie several keys together are each class's `__post_init__`, in
+one place, raising SettingsError (a ValueError, which msgspec reports at the
+table's key).
 """
 
 from __future__ import annotations
 
-import math
+import sys
+import typing
 from dataclasses import dataclass
-from typing import Literal
+from typing import Annotated, Literal
 
 import msgspec
 
+from hal.errors import SettingsError, UnknownBus
+
 Protocol = Literal["dynamixel1", "dynamixel2", "herkulex", "maestro"]
+ModelName = Literal["ax-12a", "xl430-w250", "drs-0101", "hs-82mg"]
+Baud = Literal[
+    9600, 19200, 38400, 57600, 115200, 200000, 250000, 400000, 500000,
+    666666, 1000000, 2000000, 3000000,
+]  # fmt: skip
+BAUD_RATES: tuple[int, ...] = typing.get_args(Baud)
+
+# A number that is neither infinite nor NaN (both fall outside these bounds).
+Finite = Annotated[
+    float,
+    msgspec.Meta(
+        ge=-sys.float_info.max, le=sys.float_info.max, extra={"expected": "a finite number"}
+    ),
+]
 
 
 @dataclass(frozen=True, slots=True)
 class ServoModel:
+    """A servo model's raw position units and how they map to degrees."""
+
     protocol: Protocol
     raw_min: int
     raw_max: int
@@ -27,13 +53,16 @@ class ServoModel:
     model_number: int | None  # what a ping or scan reports, where the protocol has one
 
     def to_degrees(self, raw: float, direction: int, offset: float) -> float:
+        """Degrees of a joint whose servo reads `raw`, given its direction (+1/-1) and offset."""
         return direction * (raw - self.raw_centre) * self.degrees_per_unit + offset
 
     def to_raw(self, degrees: float, direction: int, offset: float) -> int:
+        """The raw goal for `degrees`, rounded and clamped to what the servo can take."""
         raw = round(self.raw_centre + direction * (degrees - offset) / self.degrees_per_unit)
         return min(self.raw_max, max(self.raw_min, raw))
 
     def reach(self, direction: int, offset: float) -> tuple[float, float]:
+        """(lowest, highest) degrees the servo can reach with this direction and offset."""
         ends = sorted(self.to_degrees(r, direction, offset) for r in (self.raw_min, self.raw_max))
         return ends[0], ends[1]
 
@@ -48,11 +77,9 @@ MODELS: dict[str, ServoModel] = {
     "hs-82mg": ServoModel("maestro", 3968, 8000, 6000, 0.0225, None),
 }
 
-BAUD_RATES = (9600, 19200, 38400, 57600, 115200, 200000, 250000, 400000, 500000,
-              666666, 1000000, 2000000, 3000000)
-
 
 def model_named(model_number: int, protocol: str) -> str | None:
+    """The MODELS name of a servo that reports `model_number` on `protocol`; None if unknown."""
     for name, model in MODELS.items():
         if model.protocol == protocol and model.model_number == model_number:
             return name
@@ -60,95 +87,88 @@ def model_named(model_number: int, protocol: str) -> str | None:
 
 
 class _Settings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only=True):
-    pass
+    """Strict (unknown keys rejected) and immutable.
+
+    Subclasses repeat frozen=True only for mypy, which does not see it inherited.
+    """
 
 
-class BusSettings(_Settings):
-    name: str
+class BusSettings(_Settings, frozen=True):
+    """One serial port and the protocol its servos speak."""
+
+    name: Annotated[str, msgspec.Meta(pattern=r"\S", extra={"expected": "a bus name"})]
     port: str  # a stable udev name such as /dev/kaspar-body
     protocol: Protocol
-    baud: int = 57600
+    baud: Baud = 57600
     # Added to the wire time of every transaction: the servo's return delay,
     # the USB latency timer and scheduling. 20 ms covers an FTDI at 1 ms latency.
-    timeout_margin_ms: float = 20.0
-    retries: int = 2
-
-    def __post_init__(self) -> None:
-        if not self.name.strip():
-            raise ValueError("expected a bus name, found an empty string")
-        if self.baud not in BAUD_RATES:
-            rates = ", ".join(map(str, BAUD_RATES))
-            raise ValueError(f"baud: expected one of {rates}, found {self.baud}")
-        if not 0 < self.timeout_margin_ms <= 1000:
-            raise ValueError(
-                f"timeout_margin_ms: expected 0 < ms <= 1000, found {self.timeout_margin_ms}"
-            )
-        if not 0 <= self.retries <= 10:
-            raise ValueError(f"retries: expected 0 to 10, found {self.retries}")
+    timeout_margin_ms: Annotated[float, msgspec.Meta(gt=0, le=1000, extra={"unit": "ms"})] = 20.0
+    retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
 
 
-class JointSettings(_Settings):
+class JointSettings(_Settings, frozen=True):
+    """One named joint: its servo, safe range, mounting and speed limit, in degrees."""
+
     name: str
     bus: str
-    id: int  # servo id, or channel on a Maestro
-    model: Literal["ax-12a", "xl430-w250", "drs-0101", "hs-82mg"]
-    range_deg: tuple[float, float]  # the safe range: nothing is commanded outside it
-    offset_deg: float = 0.0
+    id: Annotated[int, msgspec.Meta(ge=0, le=253)]  # servo id, or channel on a Maestro
+    model: ModelName
+    range_deg: tuple[Finite, Finite]  # the safe range: nothing is commanded outside it
+    offset_deg: Finite = 0.0
     direction: Literal[1, -1] = 1
-    max_speed_dps: float = 60.0
-    rest_deg: float = 0.0
+    max_speed_dps: Annotated[float, msgspec.Meta(gt=0, le=720, extra={"unit": "deg/s"})] = 60.0
+    rest_deg: Finite = 0.0
     group: str = "body"
 
     def __post_init__(self) -> None:
+        """Range, rest and reach agree; SettingsError names the joint otherwise."""
         low, high = self.range_deg
-        if not all(math.isfinite(v) for v in (low, high, self.offset_deg, self.rest_deg)):
-            raise ValueError(f"joint {self.name!r}: angles must be finite numbers")
         if not low < high:
-            raise ValueError(f"joint {self.name!r}: range_deg must be [low, high] with low < high")
+            raise SettingsError(
+                f"joint {self.name!r}: range_deg must be [low, high] with low < high"
+            )
         if not low <= self.rest_deg <= high:
-            raise ValueError(
+            raise SettingsError(
                 f"joint {self.name!r}: rest_deg {self.rest_deg} is outside "
                 f"range_deg [{low}, {high}]"
             )
-        if not 0 < self.max_speed_dps <= 720:
-            raise ValueError(f"joint {self.name!r}: max_speed_dps expected 0 < v <= 720")
-        if not 0 <= self.id <= 253:
-            raise ValueError(f"joint {self.name!r}: id expected 0 to 253, found {self.id}")
         reach_low, reach_high = MODELS[self.model].reach(self.direction, self.offset_deg)
         if low < reach_low - 1e-6 or high > reach_high + 1e-6:
-            raise ValueError(
+            raise SettingsError(
                 f"joint {self.name!r}: range_deg [{low}, {high}] goes beyond what a {self.model} "
                 f"can reach with this offset and direction [{reach_low:.1f}, {reach_high:.1f}]"
             )
 
     @property
     def servo(self) -> ServoModel:
+        """The model of the joint's servo (units, centre, protocol)."""
         return MODELS[self.model]
 
 
-class ServoSettings(_Settings):
+class ServoSettings(_Settings, frozen=True):
+    """The whole `[servos]` table: backend, safety, rates, buses and joints."""
+
     # "sim" runs the simulated servos (tests, demos, a laptop); "real" drives the buses.
     backend: Literal["real", "sim"] = "sim"
     # What a latched fault does to the robot: "hold" keeps every healthy joint where it
     # is; "torque_off" lets the whole robot go limp. The faulty servo is always freed.
     safe_action: Literal["torque_off", "hold"] = "hold"
-    poll_interval_s: float = 1.0  # temperature, load, voltage and error bits
-    control_hz: float = 50.0  # rate of goal updates during a move
+    # Temperature, load, voltage and error bits are read this often.
+    poll_interval_s: Annotated[float, msgspec.Meta(ge=0.05, le=60, extra={"unit": "s"})] = 1.0
+    # Rate of goal updates during a move.
+    control_hz: Annotated[float, msgspec.Meta(ge=1, le=200, extra={"unit": "Hz"})] = 50.0
     max_temperature_c: float = 65.0  # a fault before the servo's own shutdown
     buses: tuple[BusSettings, ...] = ()
     joints: tuple[JointSettings, ...] = ()
 
     def __post_init__(self) -> None:
-        if not 0.05 <= self.poll_interval_s <= 60:
-            raise ValueError(f"poll_interval_s: expected 0.05 to 60, found {self.poll_interval_s}")
-        if not 1 <= self.control_hz <= 200:
-            raise ValueError(f"control_hz: expected 1 to 200, found {self.control_hz}")
-        buses = {}
+        """Buses and joints agree with each other; SettingsError names the entry otherwise."""
+        buses: dict[str, BusSettings] = {}
         for index, bus in enumerate(self.buses):
             if bus.name in buses:
-                raise ValueError(f"buses[{index}]: bus name {bus.name!r} is used twice")
+                raise SettingsError(f"buses[{index}]: bus name {bus.name!r} is used twice")
             if any(other.port == bus.port for other in buses.values()):
-                raise ValueError(
+                raise SettingsError(
                     f"buses[{index}] ({bus.name}): port {bus.port} is used by another bus"
                 )
             buses[bus.name] = bus
@@ -157,30 +177,38 @@ class ServoSettings(_Settings):
         for index, joint in enumerate(self.joints):
             where = f"joints[{index}] ({joint.name})"
             if joint.name in seen_names:
-                raise ValueError(f"{where}: joint name {joint.name!r} is used twice")
+                raise SettingsError(f"{where}: joint name {joint.name!r} is used twice")
             seen_names.add(joint.name)
-            bus = buses.get(joint.bus)
-            if bus is None:
+            joint_bus = buses.get(joint.bus)
+            if joint_bus is None:
                 known = ", ".join(buses) or "none configured"
-                raise ValueError(f"{where}: bus {joint.bus!r} is not a configured bus ({known})")
-            if joint.servo.protocol != bus.protocol:
-                raise ValueError(
-                    f"{where}: a {joint.model} does not speak {bus.protocol} (bus {bus.name})"
+                raise SettingsError(
+                    f"{where}: bus {joint.bus!r} is not a configured bus ({known})"
+                )
+            if joint.servo.protocol != joint_bus.protocol:
+                raise SettingsError(
+                    f"{where}: a {joint.model} does not speak {joint_bus.protocol} "
+                    f"(bus {joint_bus.name})"
                 )
             other = seen_ids.get((joint.bus, joint.id))
             if other is not None:
-                raise ValueError(f"{where}: id {joint.id} on bus {joint.bus} is also {other}")
+                raise SettingsError(f"{where}: id {joint.id} on bus {joint.bus} is also {other}")
             seen_ids[(joint.bus, joint.id)] = joint.name
             if joint.group in seen_names and joint.group != joint.name:
-                raise ValueError(f"{where}: group {joint.group!r} is also a joint name")
+                raise SettingsError(f"{where}: group {joint.group!r} is also a joint name")
         if self.backend == "real" and not self.joints:
-            raise ValueError("backend 'real' needs at least one joint")
+            raise SettingsError("backend 'real' needs at least one joint")
 
     def bus(self, name: str) -> BusSettings:
-        return next(bus for bus in self.buses if bus.name == name)
+        """The bus called `name`; UnknownBus (a KeyError) if there is none."""
+        for bus in self.buses:
+            if bus.name == name:
+                return bus
+        raise UnknownBus(f"unknown bus {name!r}")
 
     @property
     def groups(self) -> dict[str, tuple[str, ...]]:
+        """Group name -> its joints, in the order the joints are configured."""
         groups: dict[str, list[str]] = {}
         for joint in self.joints:
             groups.setdefault(joint.group, []).append(joint.name)

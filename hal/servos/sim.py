@@ -14,14 +14,16 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from hal.clock import Clock
-from hal.errors import ServoSilent
+from hal.errors import ServoSilent, UnknownJoint
 from hal.servos.api import FaultKind, Health
 from hal.servos.joints import Joints
-from hal.servos.settings import ServoModel, ServoSettings
+from hal.servos.settings import JointSettings, ServoModel, ServoSettings
 
 
 @dataclass
 class SimServo:
+    """One simulated servo, in raw units; it moves only when the clock is read (lazily)."""
+
     model: ServoModel
     present: float  # raw units
     goal: float
@@ -69,12 +71,15 @@ class SimDriver:
         return servo
 
     async def start(self) -> None:
+        """Start the motion clock now."""
         self._advance()
 
     async def close(self) -> None:
+        """Nothing to release."""
         return None
 
     async def ping(self, servo_id: int) -> int | None:
+        """The model's number (0 where it has none), or None for a silent or missing servo."""
         try:
             servo = self._answering(servo_id)
         except ServoSilent:
@@ -82,10 +87,16 @@ class SimDriver:
         return servo.model.model_number or 0
 
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
+        """Present raw positions, moved up to now; ServoSilent for a silent or missing servo."""
         self._advance()
         return {servo_id: round(self._answering(servo_id).present) for servo_id in ids}
 
     async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
+        """Record the packet, then set each servo's goal and speed, turning its torque on.
+
+        Torque goes on as on a Dynamixel; a silent servo ignores the packet, as
+        a real one ignores a broadcast it cannot hear.
+        """
         self._advance()
         self.writes.append(GoalWrite(self.clock.now(), {i: raw for i, (raw, _) in goals.items()}))
         for servo_id, (raw, speed_dps) in goals.items():
@@ -97,6 +108,7 @@ class SimDriver:
             servo.torque = True  # as on a Dynamixel, a goal write turns torque on
 
     async def set_torque(self, ids: Sequence[int], on: bool) -> None:
+        """Torque on or off for every answering servo in `ids`."""
         self._advance()
         for servo_id in ids:
             servo = self.servos.get(servo_id)
@@ -104,12 +116,15 @@ class SimDriver:
                 servo.torque = on
 
     async def reset_errors(self, ids: Sequence[int]) -> None:
-        return None  # a simulated fault lasts until inject_fault(joint, None)
+        """Nothing: a simulated fault lasts until inject_fault(joint, None)."""
+        return None
 
     def retried(self) -> int:
-        return 0  # a simulated bus never corrupts a reply
+        """Always 0: a simulated bus never corrupts a reply."""
+        return 0
 
     async def read_health(self, servo_id: int) -> Health:
+        """The servo's temperature and injected fault (12 V, no load); ServoSilent if silent."""
         self._advance()
         servo = self._answering(servo_id)
         return Health(
@@ -126,6 +141,7 @@ class SimServos(Joints):
     """The ServoApi on simulated servos; they start at rest, limp, as a robot is powered on."""
 
     def __init__(self, settings: ServoSettings, clock: Clock) -> None:
+        """One SimDriver per configured bus, every servo at its rest position with torque off."""
         drivers: dict[str, SimDriver] = {}
         for bus in settings.buses:
             servos = {}
@@ -138,8 +154,15 @@ class SimServos(Joints):
         self.drivers: dict[str, SimDriver] = drivers
 
     def servo(self, joint: str) -> SimServo:
-        settings = next(j for j in self.settings.joints if j.name == joint)
+        """The simulated servo behind `joint`; UnknownJoint if there is no such joint."""
+        settings = self._joint_settings(joint)
         return self.drivers[settings.bus].servos[settings.id]
+
+    def _joint_settings(self, joint: str) -> JointSettings:
+        for settings in self.settings.joints:
+            if settings.name == joint:
+                return settings
+        raise UnknownJoint(f"unknown joint {joint!r}")
 
     def inject_fault(self, joint: str, kind: FaultKind | None) -> None:
         """From now on the joint's servo reports `kind` (None heals it); the poll latches it."""
@@ -147,7 +170,7 @@ class SimServos(Joints):
 
     def push(self, joint: str, degrees: float) -> None:
         """A child moves a limp joint by hand (ignored while its torque is on)."""
-        settings = next(j for j in self.settings.joints if j.name == joint)
+        settings = self._joint_settings(joint)
         servo = self.servo(joint)
         if not servo.torque:
             servo.present = servo.goal = settings.servo.to_raw(
@@ -156,7 +179,7 @@ class SimServos(Joints):
 
     def true_position(self, joint: str) -> float:
         """Where the simulated joint really is, in degrees (for tests and the demo)."""
-        settings = next(j for j in self.settings.joints if j.name == joint)
+        settings = self._joint_settings(joint)
         # Motion is simulated lazily, at each bus operation: bring it up to now first.
         self.drivers[settings.bus]._advance()
         return settings.servo.to_degrees(

@@ -14,6 +14,8 @@ from typing import Protocol
 
 
 class SpokenStatus(StrEnum):
+    """How an utterance ended; the value is what session records show."""
+
     FINISHED = "finished"
     # cancel() was called, or the task awaiting say() was cancelled.
     CANCELLED = "cancelled"
@@ -25,6 +27,8 @@ class SpokenStatus(StrEnum):
 
 @dataclass(frozen=True, slots=True)
 class Spoken:
+    """What became of one say(): how it ended, through which engine, and when (clock seconds)."""
+
     status: SpokenStatus
     text: str
     # "pyttsx3", "espeak-ng", "clip" or "sim"; None when nothing was produced.
@@ -37,10 +41,13 @@ class Spoken:
 
     @property
     def finished(self) -> bool:
+        """True when the utterance was spoken to its end."""
         return self.status is SpokenStatus.FINISHED
 
 
 class VoiceOutput(Protocol):
+    """Kaspar's voice as the game uses it; every method runs on the event loop."""
+
     async def say(self, text: str, key: str | None = None) -> Spoken:
         """Speak `text` (or the recorded clip for phrase `key`) after what is already queued.
 

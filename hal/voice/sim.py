@@ -35,6 +35,11 @@ class SimVoice:
         prefix: str = "Kaspar",
         clips: Mapping[str, str] | None = None,
     ) -> None:
+        """Print each line to `stream` as it would be spoken at `rate` words per minute.
+
+        `also` is a real voice that speaks (or writes) each line too; `prefix` names
+        the speaker in the printed line; a phrase key in `clips` is marked as a clip.
+        """
         self._stream = stream
         self._clock = clock
         self._rate = rate
@@ -48,6 +53,11 @@ class SimVoice:
         self.lines: list[Spoken] = []
 
     async def say(self, text: str, key: str | None = None) -> Spoken:
+        """Print the line, then wait on the clock as long as it takes to say.
+
+        Lines queue in order; one queued before a cancel() is dropped. Returns
+        CANCELLED when cut by cancel() or by the caller's cancellation.
+        """
         self._serial += 1
         serial = self._serial
         async with self._turn:
@@ -90,11 +100,13 @@ class SimVoice:
         return spoken
 
     def cancel(self) -> None:
+        """Cut the current line and drop every line queued before now."""
         self._cancelled_at = self._serial
         if self._current is not None:
             self._current.cancel()
 
     async def close(self) -> None:
+        """Cancel, then close the real voice given as `also` (its failure is ignored)."""
         self.cancel()
         if self._also is not None:
             with contextlib.suppress(Exception):

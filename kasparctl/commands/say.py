@@ -13,7 +13,8 @@ import msgspec
 
 from hal.voice.api import Spoken
 from hal.voice.settings import VoiceSettings
-from hal.voice.speaker import Voice, WavSink
+from hal.voice.sinks import WavSink
+from hal.voice.speaker import Voice
 from kasparctl.config import DEFAULT_CONFIG_PATH, ConfigError, load_config
 from kasparctl.log import configure_logging
 
