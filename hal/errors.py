@@ -99,6 +99,10 @@ class VoiceError(HalError):
     """
 
 
+class EmptyRender(VoiceError):
+    """A render that finished without error and without a single sample."""
+
+
 class RepeatFilter:
     """Lets the first of a run of identical errors through and counts the rest.
 

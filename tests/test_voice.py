@@ -12,6 +12,7 @@ import subprocess
 import threading
 import wave
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -169,6 +170,70 @@ async def test_fallback_to_espeak_ng_when_pyttsx3_is_broken(tmp_path, monkeypatc
             assert len(frames(spoken.wav)) > 1000
     finally:
         await voice.close()
+
+
+class DroppingEngine:
+    """A pyttsx3 engine that renders no audio for its first `drops` lines, as libespeak-ng
+    now and then does, then a short tone."""
+
+    def __init__(self, drops: int) -> None:
+        self.drops = drops
+        self.renders: list[str] = []
+        self._job: tuple[str, str] | None = None
+
+    def setProperty(self, name, value) -> None:
+        pass
+
+    def getProperty(self, name):
+        return [SimpleNamespace(id="gmw/en-GB", name="English", languages=["en-gb"])]
+
+    def connect(self, topic, cb):
+        return object()
+
+    def disconnect(self, token) -> None:
+        pass
+
+    def save_to_file(self, text: str, filename: str) -> None:
+        self._job = (text, filename)
+
+    def runAndWait(self) -> None:
+        assert self._job is not None
+        text, filename = self._job
+        self.renders.append(text)
+        samples = b"" if len(self.renders) <= self.drops else b"\x10\x00" * 4000
+        with wave.open(filename, "wb") as audio:
+            audio.setnchannels(1)
+            audio.setsampwidth(2)
+            audio.setframerate(22050)
+            audio.writeframes(samples)
+
+
+async def test_a_line_rendered_empty_once_is_rendered_again_on_pyttsx3(tmp_path):
+    engine = DroppingEngine(drops=1)
+    voice = Voice(
+        VoiceSettings(engine="pyttsx3", wav_dir=str(tmp_path)), engine_factory=lambda: engine
+    )
+    try:
+        spoken = await say(voice, "the second line")
+    finally:
+        await voice.close()
+    assert (spoken.status, spoken.via, spoken.error) == (SpokenStatus.FINISHED, "pyttsx3", None)
+    assert engine.renders == ["the second line", "the second line"]
+    assert len(frames(spoken.wav)) == 4000
+
+
+async def test_a_line_rendered_empty_twice_falls_back_to_espeak_ng(tmp_path):
+    engine = DroppingEngine(drops=2)
+    voice = Voice(
+        VoiceSettings(engine="pyttsx3", wav_dir=str(tmp_path)), engine_factory=lambda: engine
+    )
+    try:
+        spoken = await say(voice, "never heard from pyttsx3")
+    finally:
+        await voice.close()
+    assert (spoken.status, spoken.via) == (SpokenStatus.FINISHED, "espeak-ng")
+    assert "empty WAV" in (spoken.error or "")
+    assert engine.renders == ["never heard from pyttsx3"] * 2
 
 
 async def test_fallback_to_pyttsx3_when_espeak_ng_is_missing(tmp_path):

@@ -34,11 +34,13 @@ from typing import Literal, Protocol
 
 import structlog
 
-from hal.errors import VoiceError
+from hal.errors import EmptyRender, VoiceError
 from hal.voice.settings import VoiceSettings
-from hal.voice.sinks import check_wav
+from hal.voice.sinks import check_wav, wav_frames
 
 log = structlog.get_logger("kaspar.voice")
+
+RENDER_ATTEMPTS = 2
 
 
 class Pyttsx3Voice(Protocol):
@@ -228,6 +230,19 @@ class Pyttsx3Thread:
             job.settle(None)
 
     def _render(self, engine: Pyttsx3Engine, job: _Job) -> None:
+        # libespeak-ng now and then drops a line at once (a lone end-of-message event,
+        # no samples; seen on the second line after an engine starts): rendering the
+        # same text again on the same engine gives the audio. Twice empty is a failure.
+        for attempt in range(RENDER_ATTEMPTS):
+            try:
+                self._render_once(engine, job)
+                return
+            except EmptyRender:
+                if attempt + 1 == RENDER_ATTEMPTS:
+                    raise
+                log.info("pyttsx3 rendered no audio; rendering the line again", text=job.text)
+
+    def _render_once(self, engine: Pyttsx3Engine, job: _Job) -> None:
         errors: list[BaseException | None] = []
 
         def on_error(name: object = None, exception: BaseException | None = None) -> None:
@@ -243,6 +258,8 @@ class Pyttsx3Thread:
             engine.disconnect(token)
         if errors:
             raise VoiceError(f"pyttsx3 reported {errors[0]!r}")
+        if wav_frames(job.path) == 0:
+            raise EmptyRender("pyttsx3 wrote an empty WAV")
         check_wav(job.path, "pyttsx3")
 
     def _drain(self, error: VoiceError) -> None:

@@ -118,6 +118,15 @@ def sink_for(settings: VoiceSettings) -> Sink:
     return PlayerSink(settings.player)
 
 
+def wav_frames(path: Path) -> int | None:
+    """The number of frames in a WAV file, or None when it is missing or not a WAV."""
+    try:
+        with wave.open(str(path), "rb") as audio:
+            return audio.getnframes()
+    except (OSError, EOFError, wave.Error):
+        return None
+
+
 def check_wav(path: Path, what: str) -> None:
     """Raise VoiceError naming `what` unless `path` is a readable WAV with at least one frame.
 
