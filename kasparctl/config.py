@@ -20,6 +20,7 @@ from hal.keyfob.settings import KeyfobSettings
 from hal.servos.settings import ServoSettings
 from hal.voice.settings import VoiceSettings
 from kasparctl.learning.learner import LearnerError, LearnerParams
+from kasparctl.vocabulary import MAX_CHILDREN, REQUIRED_COMMANDS, Command
 
 DEFAULT_CONFIG_PATH = Path("/etc/kaspar/kaspar.toml")
 
@@ -315,8 +316,11 @@ def _validate(config: Config, source: str) -> None:
             "game.locations",
             "only the pilot variant uses locations; remove it or set variant = 'pilot'",
         )
-    if not 1 <= game.children_per_group <= 6:
-        fail("game.children_per_group", f"expected 1 to 6, found {game.children_per_group}")
+    if not 1 <= game.children_per_group <= MAX_CHILDREN:
+        fail(
+            "game.children_per_group",
+            f"expected 1 to {MAX_CHILDREN}, found {game.children_per_group}",
+        )
     if game.correct_answers_to_learn < 1:
         fail(
             "game.correct_answers_to_learn", f"expected >= 1, found {game.correct_answers_to_learn}"
@@ -351,13 +355,12 @@ def _validate(config: Config, source: str) -> None:
                     f"expected {len(plan.children)} (one per name in children), "
                     f"found {plan.group_size}",
                 )
-        if plan.group_size is not None and not 1 <= plan.group_size <= 6:
-            fail(f"{where}.group_size", f"expected 1 to 6, found {plan.group_size}")
+        if plan.group_size is not None and not 1 <= plan.group_size <= MAX_CHILDREN:
+            fail(f"{where}.group_size", f"expected 1 to {MAX_CHILDREN}, found {plan.group_size}")
         if plan.answer_key:
             _check_answer_key(plan.answer_key, game, f"{where}.answer_key", fail)
 
 
-COMMANDS = ("next", "pause", "undo", "stop")
 GESTURES = ("long green", "long red", "double green", "double red", "both")
 
 
@@ -367,16 +370,16 @@ def _check_game_controls(
     for gesture, command in game.commands.items():
         if gesture not in GESTURES:
             fail(f"game.commands.{gesture}", f"expected a gesture, one of {', '.join(GESTURES)}")
-        if command not in COMMANDS:
+        if command not in tuple(Command):
             fail(
                 f"game.commands.{gesture}",
-                f"expected one of {', '.join(COMMANDS)}, found {command!r}",
+                f"expected one of {', '.join(Command)}, found {command!r}",
             )
-    for command in ("next", "pause", "stop"):
+    for command in REQUIRED_COMMANDS:
         if command not in game.commands.values():
             fail(
                 "game.commands",
-                f"expected a gesture for {command!r}: a session cannot be run without it",
+                f"expected a gesture for {command.value!r}: a session cannot be run without it",
             )
     if game.variant == "pilot" and game.poses and set(game.poses) != set(game.locations):
         fail(
