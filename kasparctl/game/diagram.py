@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from transitions.extensions.diagrams import GraphMachine
 
-from kasparctl.game.machine import STATES, TRANSITIONS
+from kasparctl.game.stages import STATES, TRANSITIONS
 
 
 class _Model:

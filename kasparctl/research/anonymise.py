@@ -14,6 +14,8 @@ from typing import Any
 
 
 class Pseudonyms:
+    """Replaces each first name by its pseudonym, as a whole word."""
+
     def __init__(self, names: Mapping[str, str]) -> None:
         self._names = dict(names)
         # Longest first, so "Anna-Lena" is replaced before "Anna".
@@ -25,6 +27,7 @@ class Pseudonyms:
         )
 
     def text(self, value: str) -> str:
+        """`value` with every name replaced."""
         if self._pattern is None:
             return value
         return self._pattern.sub(lambda match: self._names[match.group(1)], value)
