@@ -120,3 +120,24 @@ def test_the_interrupted_session_resumes_to_the_same_end(tmp_path: Path, from_re
         assert mine == theirs
     # The records written before the crash are untouched.
     assert (copy / RECORDS_FILE).read_text().startswith((INTERRUPTED / RECORDS_FILE).read_text())
+
+
+def test_a_line_that_is_no_record_is_reported_never_a_crash(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A readable JSON line that no record type accepts: each reader names its file and
+    line on stderr, and goes on with the records it can read."""
+    copy = shutil.copytree(INTERRUPTED, tmp_path / "sessions" / INTERRUPTED.name)
+    records = copy / RECORDS_FILE
+    lines = records.read_text().splitlines(keepends=True)
+    lines.insert(4, '{"kind": "trial", "seq": 5, "trial": "five"}\n')
+    lines.insert(7, '{"kind": "hug", "seq": 8}\n')
+    records.write_text("".join(lines))
+    trials = tmp_path / "trials.csv"
+    assert main(["export", "--state-dir", str(tmp_path), "--csv", str(trials)]) == 0
+    assert main(["sessions", "--state-dir", str(tmp_path)]) == 0
+    assert main(["report", "--state-dir", str(tmp_path), "--out", str(tmp_path / "r")]) == 0
+    err = capsys.readouterr().err
+    for line in (5, 8):
+        assert f"{records}: line {line}: skipped, not a valid record" in err
+    assert len(trials.read_text().splitlines()) == 1 + 8  # header and the eight trials

@@ -16,6 +16,7 @@ class _Model:
 
 
 def mermaid() -> str:
+    """The machine's states and transitions (with their conditions) as a mermaid diagram."""
     machine = GraphMachine(
         model=_Model(),
         states=list(STATES),

@@ -129,14 +129,28 @@ class Game:
     stage: str  # set by the machine
 
     if TYPE_CHECKING:
-        # The machine's triggers, added to the model by transitions.
-        async def start(self) -> bool: ...
-        async def advance(self) -> bool: ...
-        async def pause(self) -> bool: ...
-        async def resume(self) -> bool: ...
-        async def fail(self) -> bool: ...
-        async def stop(self) -> bool: ...
-        async def trigger(self, name: str) -> bool: ...
+        # The machine's triggers, added to the model by transitions; each returns
+        # whether a transition happened (kasparctl.game.stages.TRANSITIONS).
+        async def start(self) -> bool:
+            """Idle to the first step: placing (names) or guessing (pilot)."""
+
+        async def advance(self) -> bool:
+            """A step to the next one, farewell to finished."""
+
+        async def pause(self) -> bool:
+            """A pausable step to paused."""
+
+        async def resume(self) -> bool:
+            """Paused or fault back to the step left (or idle)."""
+
+        async def fail(self) -> bool:
+            """To the fault stage."""
+
+        async def stop(self) -> bool:
+            """To stopped: the researcher ended the session."""
+
+        async def trigger(self, name: str) -> bool:
+            """Fire the trigger called `name`."""
 
     def __init__(
         self,
@@ -146,6 +160,7 @@ class Game:
         open_session: Callable[[], OpenedSession],
         resumed: OpenedSession | None = None,
     ) -> None:
+        """A game that opens its session with `open_session` at the start, or resumes `resumed`."""
         self.config = config
         self.settings = config.game
         self.hw = hardware

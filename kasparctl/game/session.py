@@ -254,6 +254,7 @@ class RecordLog:
     """Append-only JSON lines; `append` returns once the record is on disk."""
 
     def __init__(self, path: Path) -> None:
+        """Open (or create) the log at `path` for appending."""
         self.path = path
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, PRIVATE_FILE)
 
@@ -277,6 +278,7 @@ class Session:
     """One group's session on disk: its plan, its records and its latest state."""
 
     def __init__(self, directory: Path, plan: dict[str, Any], last_seq: int) -> None:
+        """The session in `directory`; use create or open rather than this."""
         self.directory = directory
         self.plan = plan
         self.id: str = plan["session"]

@@ -17,6 +17,7 @@ class Pseudonyms:
     """Replaces each first name by its pseudonym, as a whole word."""
 
     def __init__(self, names: Mapping[str, str]) -> None:
+        """`names`: each first name and its pseudonym."""
         self._names = dict(names)
         # Longest first, so "Anna-Lena" is replaced before "Anna".
         ordered = sorted(self._names, key=len, reverse=True)

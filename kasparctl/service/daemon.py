@@ -78,6 +78,7 @@ class Daemon:
     """The service: the hardware, one session after another, systemd's notifications, stopping."""
 
     def __init__(self, options: DaemonOptions, notifier: Notifier | None = None) -> None:
+        """Load the configuration; nothing is opened until run()."""
         self.options = options
         self.config = self._load()
         self.notifier = notifier or Notifier()

@@ -61,6 +61,7 @@ class SimulatedGroup:
         narrate: Say | None = None,
         patience: int = MAX_RESUMES,
     ) -> None:
+        """Children who press `keyfob` and move `servos`, believing `answers` (a toy per target)."""
         self.keyfob = keyfob
         self.servos = servos
         self.teacher = teacher
