@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import functools
-import math
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar, cast
@@ -36,10 +34,10 @@ from hal.errors import HalError
 from hal.keyfob.api import KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import Gesture, GestureKind
 from hal.servos.api import Fault
-from hal.voice.api import Spoken, SpokenStatus
 from kasparctl.config import Config, SessionPlan
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.phrases import BAND_LINE_PREFIX, PhrasePicker
+from kasparctl.game.presses import ChildPresses, Press
 from kasparctl.game.records import (
     Button,
     CommandRecord,
@@ -67,13 +65,14 @@ from kasparctl.game.researcher import (
     gesture_needs,
 )
 from kasparctl.game.session import Session
+from kasparctl.game.speech import Speech, VoiceFailed
 from kasparctl.game.stages import (
     ENDS,
     PAUSABLE,
     STATES,
     STEPS,
-    TRANSITIONS,
     Conditions,
+    bound_transitions,
 )
 from kasparctl.game.state import GameState
 from kasparctl.game.trial import Answer, TrialPlan, plan_trial, score_answer
@@ -104,15 +103,6 @@ class HardwareFault:
     kind: FaultSource
     detail: str
     joint: str | None = None
-
-
-class VoiceFailed(Exception):
-    """Kaspar could not say a line: the session cannot go on unheard."""
-
-
-class SpeechCut(Exception):
-    """A line was cut short by voice.cancel(); not a task cancellation, which must
-    never be swallowed (the daemon's stop cancels the game's own task)."""
 
 
 # What the run loop takes, one at a time.
@@ -165,6 +155,7 @@ class Game:
         self.settings = config.game
         self.hw = hardware
         self.picker = picker
+        self.speech = Speech(picker, hardware.voice, self._record)
         self._open_session = open_session
         self.session: Session | None = None
         self.plan: SessionPlan | None = None
@@ -172,10 +163,7 @@ class Game:
         self.resumed = resumed is not None
         self._inputs: asyncio.Queue[GameInput] = asyncio.Queue()
         self._step_task: asyncio.Task[None] | None = None
-        self._answer: asyncio.Future[tuple[str, float]] | None = None
-        self._question_end = 0.0
-        self._last_answer_at: float | None = None
-        self._last_answer_trial = 0
+        self.presses = ChildPresses(self.settings.extra_press_gap_s)
         self._seen_faults: set[Fault] = set()
         self.listeners: list[Listener] = []
         self.commands = commands_by_gesture(self.settings.commands)
@@ -191,7 +179,7 @@ class Game:
             states=[
                 {"name": name, "on_enter": "_entered", "on_exit": "_leaving"} for name in STATES
             ],
-            transitions=[self._bind_conditions(transition) for transition in TRANSITIONS],
+            transitions=bound_transitions(self._holds),
             initial=initial,
             queued=True,
             auto_transitions=False,
@@ -200,14 +188,6 @@ class Game:
         )
 
     # -- conditions -------------------------------------------------------------
-
-    def _bind_conditions(self, transition: dict[str, Any]) -> dict[str, Any]:
-        """The table's transition with each named condition asked of this game."""
-        bound = dict(transition)
-        for key in ("conditions", "unless"):
-            if key in bound:
-                bound[key] = functools.partial(self._holds, bound[key])
-        return bound
 
     def _holds(self, name: str) -> bool:
         return self.conditions().holds(name)
@@ -243,7 +223,7 @@ class Game:
                     SessionRecord(event=SessionEvent.RESUMED, step=self.stage, trials=trials)
                 )
                 self._emit(GameEvent.RESUMED, step=self.stage)
-                await self._announce("session.resumed")
+                await self.speech.announce("session.resumed")
                 if self.stage != "paused":
                     await self._entered()
             elif self.stage == "idle":
@@ -271,7 +251,7 @@ class Game:
         elif isinstance(event, KeyfobBack):
             self._record(HalRecord(event=HalEvent.KEYFOB_BACK, device=event.device))
             self._emit(GameEvent.KEYFOB_BACK)
-            await self._announce("fault.keyfob_back")
+            await self.speech.announce("fault.keyfob_back")
 
     async def _read_keyfob(self) -> None:
         while True:
@@ -287,7 +267,9 @@ class Game:
 
     async def _on_gesture(self, gesture: Gesture) -> None:
         if gesture.kind is GestureKind.PRESS and gesture.button in ("green", "red"):
-            self._on_child_press(gesture)
+            not_an_answer = self.presses.press(gesture.button, gesture.at, self.stage)
+            if not_an_answer is not None:
+                self._record(not_an_answer)
             return
         name = gesture_name(gesture)
         command = self.commands.get(name)
@@ -298,29 +280,6 @@ class Game:
             )
             return
         await self._on_command(command, name, gesture.at)
-
-    def _on_child_press(self, gesture: Gesture) -> None:
-        answer = self._answer
-        if answer is not None and not answer.done():
-            if gesture.at >= self._question_end:
-                answer.set_result((gesture.button, gesture.at))
-                return
-            reason = "before the question was finished"
-        elif self._last_answer_at is not None and (
-            gesture.at - self._last_answer_at <= self.settings.extra_press_gap_s
-        ):
-            self._record(
-                PressRecord(
-                    button=gesture.button,
-                    at=gesture.at,
-                    extra=True,
-                    trial=self._last_answer_trial,
-                )
-            )
-            return
-        else:
-            reason = f"no question open ({self.stage})"
-        self._record(PressRecord(button=gesture.button, at=gesture.at, ignored=reason))
 
     async def _on_command(self, command: Command, gesture: str, at: float) -> None:
         stage = self.stage
@@ -338,7 +297,7 @@ class Game:
         if stage == "fault" and key is Confirmation.RESUME and not await self._rearm():
             self._record(msgspec.structs.replace(given, ignored="the hardware is still faulty"))
             self._emit(GameEvent.RESUME_REFUSED)
-            await self._announce("fault.problem")
+            await self.speech.announce("fault.problem")
             return
         applied = msgspec.structs.replace(given, applied=True, confirm=key)
         if command is Command.PAUSE and state is not None:
@@ -347,16 +306,16 @@ class Game:
             self._record(applied)
         # Kaspar confirms before what the command starts, and after what it stops.
         if key in SPOKEN_FIRST:
-            await self._announce(f"confirm.{key}")
+            await self.speech.announce(f"confirm.{key}")
         opens_session = self.session is None
         await self._fire(key)
         if opens_session:
             self._record(applied)  # "start" opens the session: its command is its first record
         if key is Confirmation.STOP:
             # To rest at once, saying goodbye on the way: safety does not wait for words.
-            await asyncio.gather(self._announce(f"confirm.{key}"), self._rest_safely())
+            await asyncio.gather(self.speech.announce(f"confirm.{key}"), self._rest_safely())
         elif key not in SPOKEN_FIRST:
-            await self._announce(f"confirm.{key}")
+            await self.speech.announce(f"confirm.{key}")
 
     async def _fire(self, key: Confirmation) -> None:
         if key is Confirmation.UNDO:
@@ -442,7 +401,7 @@ class Game:
     async def _cancel_step(self) -> None:
         task, self._step_task = self._step_task, None
         if task is not None and not task.done():
-            self.hw.voice.cancel()
+            self.speech.cut()
             # wait(), not `await task`: the step's own CancelledError stays inside it,
             # while a cancellation of this task (the daemon stopping) still gets through.
             # Again and again: a library that swallowed the cancellation (as wait_for can
@@ -456,9 +415,7 @@ class Game:
                     "a step carried on after being cancelled; cancelling again",
                     step=task.get_name(),
                 )
-        if self._answer is not None and not self._answer.done():
-            self._answer.cancel()
-        self._answer = None
+        self.presses.close()
 
     async def _on_step_ended(self, event: StepEnded) -> None:
         if event.step != self.stage:
@@ -486,11 +443,12 @@ class Game:
         await self.fail()  # from any stage but the ends (the table's "fail" sources)
         self._emit(GameEvent.FAULT, kind=fault.kind)
         if fault.kind is FaultSource.SERVO:
-            await self._announce("fault.servo", joint=(fault.joint or "a joint").replace("_", " "))
+            joint = (fault.joint or "a joint").replace("_", " ")
+            await self.speech.announce("fault.servo", joint=joint)
         elif fault.kind is FaultSource.KEYFOB:
-            await self._announce("fault.keyfob_lost")
+            await self.speech.announce("fault.keyfob_lost")
         else:
-            await self._announce("fault.problem")
+            await self.speech.announce("fault.problem")
 
     def note_shutdown(self, reason: str) -> None:
         """The daemon is stopping: the session stays unfinished, to be resumed at the next start."""
@@ -499,13 +457,13 @@ class Game:
     # -- the steps --------------------------------------------------------------
 
     async def _step_placing(self) -> None:
-        await self._say("session.greeting")
-        await self._say("steps.place_bags")
+        await self.speech.say("session.greeting")
+        await self.speech.say("steps.place_bags")
         self._emit(GameEvent.WAITING_FOR_RESEARCHER, step="placing")
         await asyncio.Event().wait()  # the researcher's "next" moves on
 
     async def _step_revealing(self) -> None:
-        await self._say("steps.reveal_toys")
+        await self.speech.say("steps.reveal_toys")
         self._emit(GameEvent.WAITING_FOR_RESEARCHER, step="revealing")
         await asyncio.Event().wait()
 
@@ -513,24 +471,24 @@ class Game:
         state = self._require_state()
         group = self.settings.pointing_group
         if state.teach_round == 0 and state.teach_bag == 0:
-            await self._say("steps.teach_pointing")
+            await self.speech.say("steps.teach_pointing")
         await self.hw.servos.set_compliant(group, True)
         try:
             while state.teach_round < self._group_size():
                 if state.teach_bag == 0 and state.teach_round > 0:
-                    await self._say("teach.swap_roles")
+                    await self.speech.say("teach.swap_roles")
                 await self._teach_one_bag(state.teach_bag, group)
         finally:
             # Torque back on holding where the arm is, also on pause or fault. If the
             # arm was left outside its safe range this fails, and the step fails
             # into the fault state: the researcher moves the arm back and resumes.
             await asyncio.shield(self.hw.servos.set_compliant(group, False))
-        await self._say("teach.all_bags_done")
+        await self.speech.say("teach.all_bags_done")
 
     async def _teach_one_bag(self, bag: int, group: str) -> None:
         round_before = self._require_state().teach_round
         while True:
-            await self._say("teach.move_arm", bag=str(bag + 1))
+            await self.speech.say("teach.move_arm", bag=str(bag + 1))
             self._emit(GameEvent.TEACH, bag=bag, round=round_before)
             button, at = await self._wait_for_press()
             if button == "green":
@@ -538,13 +496,13 @@ class Game:
                 outside = self._outside_safe_range(pose)
                 if not outside:
                     self._change(PoseRecord(bag=bag, round=round_before, pose=pose, at=at))
-                    await self._say("teach.pose_logged", bag=str(bag + 1))
+                    await self.speech.say("teach.pose_logged", bag=str(bag + 1))
                     return
                 # Kaspar could never point there: ask again rather than log it.
                 self._record(PressRecord(button=button, at=at, teach_retry=bag, outside=outside))
             else:
                 self._record(PressRecord(button=button, at=at, teach_retry=bag))
-            await self._say("teach.try_again", bag=str(bag + 1))
+            await self.speech.say("teach.try_again", bag=str(bag + 1))
 
     def _outside_safe_range(self, pose: dict[str, float]) -> list[str]:
         ranges = {joint.name: joint.range_deg for joint in self.config.servos.joints}
@@ -558,15 +516,15 @@ class Game:
         state = self._require_state()
         if state.trials == 0:
             pilot = self.settings.variant == "pilot"
-            await self._say("session.intro_pilot" if pilot else "steps.guessing")
+            await self.speech.say("session.intro_pilot" if pilot else "steps.guessing")
         while not state.all_done:
             await self._one_trial(state)
 
     async def _step_farewell(self) -> None:
         state = self._require_state()
         if all(p.learned is not None for p in state.progress):
-            await self._say("react.all_learned")
-        await self._say("session.farewell")
+            await self.speech.say("react.all_learned")
+        await self.speech.say("session.farewell")
         await self.hw.servos.rest()
 
     # -- one guess --------------------------------------------------------------
@@ -576,40 +534,41 @@ class Game:
         session_plan = self._require_plan()
         params = self.config.profile(session_plan.profile)
         group_size = self._group_size()
-        plan = plan_trial(state, params, self.settings, session_plan, group_size, self.picker.book)
+        plan = plan_trial(state, params, self.settings, session_plan, group_size, self.speech.book)
         bind_context(trial=plan.trial, target=plan.target_name)
         # Presses from here until the question is finished are recorded and ignored.
-        self._answer = asyncio.get_running_loop().create_future()
-        self._question_end = math.inf
-        await self._say("turn.child", child=plan.child)
+        answer = self.presses.open()
+        await self.speech.say("turn.child", child=plan.child)
         await self._point_at(plan.target_name)
         spoken = await self._ask(plan)
-        self._question_end = self._now()
+        self.presses.asked(self._now())
         self._emit(GameEvent.QUESTION, target=plan.target, choice=plan.choice, trial=plan.trial)
-        button, pressed_at = await self._wait_for_answer()
-        answer = Answer(spoken, self._question_end, cast(Button, button), pressed_at)
-        scored = score_answer(plan, answer, state, params, self.settings, session_plan)
+        button, pressed_at = await self._wait_for_answer(answer)
+        heard = Answer(spoken, self.presses.question_end, cast(Button, button), pressed_at)
+        scored = score_answer(plan, heard, state, params, self.settings, session_plan)
         record = self._change(scored)
-        self._last_answer_at, self._last_answer_trial = pressed_at, record.trial
+        self.presses.answered(pressed_at, record.trial)
         self._emit(GameEvent.ANSWERED, trial=record.trial, feedback=button)
         await self._react(record.green)
         if record.learned:
             if self.settings.variant == "pilot":
-                await self._say("react.learned_pilot", toy=plan.toy, location=plan.target_name)
+                where = plan.target_name
+                await self.speech.say("react.learned_pilot", toy=plan.toy, location=where)
             else:
-                await self._say("react.learned", toy=plan.toy)
+                await self.speech.say("react.learned", toy=plan.toy)
         elif state.progress[plan.target].given_up:
-            await self._say("prompt.ask_researcher")
+            await self.speech.say("prompt.ask_researcher")
 
     async def _ask(self, plan: TrialPlan) -> tuple[str, ...]:
         """How sure Kaspar is (if the plan says it), then its guess; the lines it said."""
+        say = self.speech.say
         spoken: list[str] = []
         if plan.band is not None:
-            spoken.append(await self._say(BAND_LINE_PREFIX + plan.band))
+            spoken.append(await say(BAND_LINE_PREFIX + plan.band))
         if self.settings.variant == "pilot":
-            spoken.append(await self._say("guess.pilot", toy=plan.toy, location=plan.target_name))
+            spoken.append(await say("guess.pilot", toy=plan.toy, location=plan.target_name))
         else:
-            spoken.append(await self._say("guess.names", toy=plan.toy))
+            spoken.append(await say("guess.names", toy=plan.toy))
         return tuple(spoken)
 
     async def _undo(self) -> bool:
@@ -618,13 +577,13 @@ class Game:
             return False
         await self._cancel_step()
         self._change(UndoRecord(trial=state.undo.trial))
-        self._last_answer_at = None
+        self.presses.forget_answer()
         self._start_step("guessing")
         return True
 
     async def _react(self, green: bool) -> None:
         expression = self.settings.happy_pose if green else self.settings.sad_pose
-        line = self._say("react.happy" if green else "react.sad")
+        line = self.speech.say("react.happy" if green else "react.sad")
         if not expression:
             await line
             return
@@ -646,15 +605,11 @@ class Game:
 
     # -- waiting for children ---------------------------------------------------
 
-    async def _wait_for_press(self) -> tuple[str, float]:
-        self._question_end = self._now()
-        self._answer = asyncio.get_running_loop().create_future()
-        return await self._answer
+    async def _wait_for_press(self) -> Press:
+        return await self.presses.open(question_end=self._now())
 
-    async def _wait_for_answer(self) -> tuple[str, float]:
+    async def _wait_for_answer(self, answer: asyncio.Future[Press]) -> Press:
         """The first green or red after the question; prompts while nobody answers."""
-        answer = self._answer
-        assert answer is not None
         prompts = ("prompt.nobody_first", "prompt.nobody_second", "prompt.ask_researcher")
         delays = self.settings.prompt_after_s
         for index, key in enumerate(prompts):
@@ -665,33 +620,10 @@ class Game:
                     return await asyncio.shield(answer)
             self._record(PromptRecord(line=key, waited=delay))
             self._emit(GameEvent.PROMPT, line=key)
-            await self._say(key)
+            await self.speech.say(key)
         return await answer
 
     # -- speaking, recording ----------------------------------------------------
-
-    async def _announce(self, key: str, **values: str) -> None:
-        """Speech from the run loop: a failing voice is recorded, never raised here."""
-        with contextlib.suppress(VoiceFailed, SpeechCut):
-            await self._say(key, **values)
-
-    async def _say(self, key: str, **values: str) -> str:
-        text = self.picker.line(key, **values)
-        spoken: Spoken = await self.hw.voice.say(text, key)
-        if spoken.status is SpokenStatus.CANCELLED:
-            raise SpeechCut(text)
-        if spoken.status is not SpokenStatus.FINISHED:
-            self._record(
-                HalRecord(
-                    event=HalEvent.VOICE,
-                    status=spoken.status.value,
-                    text=text,
-                    error=spoken.error,
-                )
-            )
-            if spoken.status is SpokenStatus.FAILED:
-                raise VoiceFailed(spoken.error or "the voice failed")
-        return text
 
     def _record(self, record: RecordT) -> RecordT | None:
         if self.session is None:

@@ -12,6 +12,8 @@ its model, `may` asks it without any machine.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -111,3 +113,15 @@ def may(trigger: str, stage: str, conditions: Conditions) -> str | None:
         ):
             return str(transition["dest"])
     return None
+
+
+def bound_transitions(holds: Callable[[str], bool]) -> list[dict[str, Any]]:
+    """TRANSITIONS for a live machine: each named condition asked of `holds(name)`."""
+    bound = []
+    for transition in TRANSITIONS:
+        live = dict(transition)
+        for key in ("conditions", "unless"):
+            if key in live:
+                live[key] = functools.partial(holds, live[key])
+        bound.append(live)
+    return bound
