@@ -20,7 +20,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+import msgspec
+
 from kasparctl.config import Config
+from kasparctl.game.records import CommandRecord, TrialRecord
 from kasparctl.game.session import Session
 from kasparctl.game.state import GameState
 from kasparctl.learning.study_stats import summarise
@@ -30,6 +33,7 @@ from kasparctl.sim.demo import DemoOptions, build, demo_config, run_demo, with_v
 from kasparctl.sim.replicate import replicate
 from kasparctl.sim.simulate import simulate_study
 from kasparctl.sim.teacher import Teacher
+from kasparctl.vocabulary import Command
 
 LATENCY_TARGET_MS = 10.0
 GAMES_TARGET = 50.0
@@ -116,8 +120,12 @@ def stop_to_rest_s(games: int, state_root: Path) -> list[float]:
         ended = loop.time()
         session = rig.game.session
         assert session is not None
-        both = next(r for r in session.records() if r.get("command") == "stop")
-        took.append(ended - both["at"])
+        both = next(
+            r
+            for r in session.records()
+            if isinstance(r, CommandRecord) and r.command is Command.STOP
+        )
+        took.append(ended - both.at)
 
     for seed in range(games):
         simtime.run(one(seed), virtual=True)
@@ -140,17 +148,20 @@ def record_and_snapshot_ms(state_root: Path, trials: int = 300) -> list[float]:
     config = config_for("names")
     session = Session.create(state_root, {"group": "bench"})
     state = GameState.new(config.game, config.profile(), seed=1)
-    fields = {
-        "probabilities": [1 / 6] * 6,
-        "q_before": [0.0] * 6,
-        "q_after": [0.0] * 6,
-        "spoken": ["x" * 40] * 2,
-    }
+    trial = TrialRecord(
+        trial=1, problem_trial=1, step="guessing", target="bag 1", target_index=0,
+        child="child one", child_index=0, candidates=list(config.game.toys),
+        probabilities=[1 / 6] * 6, entropy=2.585, band="no_idea", spoken=["x" * 40] * 2,
+        choice="lion", choice_index=0, feedback="green", question_end=0.0, feedback_at=1.0,
+        reaction_time=1.0, reward=1.0, q_before=[0.0] * 6, q_after=[0.0] * 6,
+        learner_rng=state.learner.rng.bit_generator.state, perseverative=False,
+        win_shift=False, correct=None, feedback_right=None, learned=False,
+    )
     times = []
     for number in range(1, trials + 1):
         start = time.perf_counter()
-        session.record("trial", float(number), trial=number, **fields)
-        session.save_state(state.to_plain())
+        session.record(msgspec.structs.replace(trial, trial=number), float(number))
+        session.save_state(state)
         times.append((time.perf_counter() - start) * 1000.0)
     session.close()
     return times

@@ -34,7 +34,7 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests"), str(ROOT / "bench")]
 
 from soak_faults import KINDS  # noqa: E402
 
-from kasparctl.game.session import RECORDS_FILE, read_records  # noqa: E402
+from kasparctl.game.session import RECORDS_FILE, read_json_lines  # noqa: E402
 
 WORKER = ROOT / "bench" / "soak_worker.py"
 MAX_CRASHES_PER_WORKER = 5
@@ -116,7 +116,7 @@ def check_game(directory: Path) -> dict[str, Any]:
     records: list[dict[str, Any]] = []
     torn = 0
     for session in sessions:
-        read = read_records(session / RECORDS_FILE)
+        read = read_json_lines(session / RECORDS_FILE)
         records += read.records
         torn += len(read.warnings)
         torn_file = session / (RECORDS_FILE + ".torn")

@@ -34,7 +34,7 @@ from soak_rig import (  # noqa: E402
 from hal.clock import LoopClock  # noqa: E402
 from hal.voice.speaker import Voice  # noqa: E402
 from kasparctl.config import Config  # noqa: E402
-from kasparctl.game.session import RECORDS_FILE, find_unfinished, read_records, write_atomic  # noqa: E402
+from kasparctl.game.session import RECORDS_FILE, find_unfinished, read_json_lines, write_atomic  # noqa: E402
 from kasparctl.log import configure_logging  # noqa: E402
 from kasparctl.sim import simtime  # noqa: E402
 from kasparctl.sim.demo import DemoOptions, assemble, demo_config, with_variant  # noqa: E402
@@ -113,7 +113,7 @@ async def play(game: int, directory: Path, seed: int, faults: int, ledger: Ledge
             "game": game,
             "stalled": result is None,
             "finished": bool(result and result.finished),
-            "final_state": result.final_state if result else rig.game.state,
+            "final_state": result.final_state if result else rig.game.stage,
             "trials": result.trials if result else None,
             "goals_checked": monitor.goals_checked,
             "violations": monitor.violations,
@@ -143,7 +143,7 @@ def run_game(game: int, root: Path, seed: int, faults: int) -> None:
     ledger = Ledger(directory / "ledger.jsonl")
     if finished_before(directory):
         (session,) = (directory / "state" / "sessions").iterdir()
-        records = read_records(session / RECORDS_FILE).records
+        records = read_json_lines(session / RECORDS_FILE).records
         trials = sum(r["kind"] == "trial" for r in records)
         result = {"game": game, "finished": True, "final_state": "finished", "trials": trials,
                   "stalled": False, "recovered_from_disk": True}

@@ -9,13 +9,26 @@ nothing of the game.
 - VoiceOutput (hal.voice.api): say, cancel, close; failures are results, not exceptions.
 """
 
+from dataclasses import dataclass
+
 from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobInput, KeyfobLost
 from hal.servos.api import Fault, FaultKind, ServoApi
 from hal.voice.api import Spoken, SpokenStatus, VoiceOutput
 
+
+@dataclass
+class Hardware:
+    """The robot's three parts, as the game sees them: built by hal.build, or by a test rig."""
+
+    servos: ServoApi
+    keyfob: KeyfobInput
+    voice: VoiceOutput
+
+
 __all__ = [
     "Fault",
     "FaultKind",
+    "Hardware",
     "InputEvent",
     "KeyfobBack",
     "KeyfobInput",

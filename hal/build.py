@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
 from typing import TextIO
 
 import msgspec
 
+from hal import Hardware
 from hal.clock import Clock
 from hal.keyfob.api import KeyfobInput
 from hal.keyfob.settings import KeyfobSettings
@@ -15,13 +15,6 @@ from hal.servos.api import ServoApi
 from hal.servos.settings import ServoSettings
 from hal.voice.api import VoiceOutput
 from hal.voice.settings import VoiceSettings
-
-
-@dataclass
-class BuiltHardware:
-    servos: ServoApi
-    keyfob: KeyfobInput
-    voice: VoiceOutput
 
 
 def build_servos(settings: ServoSettings, clock: Clock) -> ServoApi:
@@ -44,7 +37,7 @@ def build(
     sim: bool = False,
     sim_keys: TextIO | None = None,
     sim_lines: TextIO | None = None,
-) -> BuiltHardware:
+) -> Hardware:
     """Each part as its `backend` says, or every part simulated when `sim`.
 
     A simulated keyfob reads keys from `sim_keys` (standard input by default:
@@ -69,4 +62,4 @@ def build(
         from hal.voice.speaker import Voice
 
         built_voice = Voice(voice, clock)
-    return BuiltHardware(built_servos, built_keyfob, built_voice)
+    return Hardware(built_servos, built_keyfob, built_voice)

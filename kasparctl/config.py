@@ -21,6 +21,7 @@ from hal.keyfob.settings import KeyfobSettings
 from hal.servos.settings import ServoSettings
 from hal.voice.settings import VoiceSettings
 from kasparctl.learning.learner import LearnerError, LearnerParams
+from kasparctl.vocabulary import MAX_CHILDREN, REQUIRED_COMMANDS, Command
 
 DEFAULT_CONFIG_PATH = Path("/etc/kaspar/kaspar.toml")
 
@@ -118,7 +119,7 @@ class GameSettings(_Settings, frozen=True):
         "crocodile",
     )
     locations: tuple[Name, ...] = ()
-    children_per_group: Annotated[int, msgspec.Meta(ge=1, le=6)] = 3
+    children_per_group: Annotated[int, msgspec.Meta(ge=1, le=MAX_CHILDREN)] = 3
     # Correct answers in a row for the same label before a target counts as
     # learned; 2 gives the pilot's minimum of 2 trials per association.
     correct_answers_to_learn: Annotated[int, msgspec.Meta(ge=1)] = 2
@@ -174,8 +175,10 @@ class SessionPlan(_Settings, frozen=True):
     profile: str = "paper"
     speak_uncertainty: bool = True
     # First names are optional; without them Kaspar says "child one", "child two"...
-    children: tuple[Name, ...] = ()
-    group_size: Annotated[int, msgspec.Meta(ge=1, le=6)] | None = None
+    children: Annotated[
+        tuple[Name, ...], msgspec.Meta(max_length=MAX_CHILDREN, extra={"item": "name"})
+    ] = ()
+    group_size: Annotated[int, msgspec.Meta(ge=1, le=MAX_CHILDREN)] | None = None
     # The correct label for each target, in target order; for research records only.
     answer_key: tuple[str, ...] = ()
 
@@ -516,7 +519,6 @@ def _check_plan(plan: SessionPlan, where: str, config: Config, fail: _Fail) -> N
         _check_answer_key(plan.answer_key, config.game, f"{where}.answer_key", fail)
 
 
-COMMANDS = ("next", "pause", "undo", "stop")
 GESTURES = ("long green", "long red", "double green", "double red", "both")
 
 
@@ -526,16 +528,16 @@ def _check_game_controls(
     for gesture, command in game.commands.items():
         if gesture not in GESTURES:
             fail(f"game.commands.{gesture}", f"expected a gesture, one of {', '.join(GESTURES)}")
-        if command not in COMMANDS:
+        if command not in tuple(Command):
             fail(
                 f"game.commands.{gesture}",
-                f"expected one of {', '.join(COMMANDS)}, found {command!r}",
+                f"expected one of {', '.join(Command)}, found {command!r}",
             )
-    for command in ("next", "pause", "stop"):
+    for command in REQUIRED_COMMANDS:
         if command not in game.commands.values():
             fail(
                 "game.commands",
-                f"expected a gesture for {command!r}: a session cannot be run without it",
+                f"expected a gesture for {command.value!r}: a session cannot be run without it",
             )
     if game.variant == "pilot" and game.poses and set(game.poses) != set(game.locations):
         fail(

@@ -16,6 +16,7 @@ from import_graph import Edge, cycles, edges, modules
 KASPARCTL_FLOORS: dict[str, int] = {
     "kasparctl": 0,
     "kasparctl.learning": 1,
+    "kasparctl.vocabulary": 1,
     "kasparctl.config": 2,
     "kasparctl.log": 2,
     "kasparctl.game": 3,

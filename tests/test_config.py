@@ -83,6 +83,10 @@ def test_relative_paths_are_relative_to_the_file(tmp_path: Path) -> None:
         ("[[sessions]]\ngroup = 'A'\nprofile = 'turbo'", "kaspar.toml: sessions[0].profile: expected one of fast, paper, slow, found 'turbo'"),
         ("[[sessions]]\ngroup = 'A'\nspeak_uncertainty = 'yes'", "kaspar.toml: sessions[0].speak_uncertainty: expected bool, found str"),
         ("[[sessions]]\ngroup = 'A'\ngroup_size = 7", "kaspar.toml: sessions[0].group_size: expected 1 to 6, found 7"),
+        (
+            "[[sessions]]\ngroup = 'A'\nchildren = ['a', 'b', 'c', 'd', 'e', 'f', 'g']",
+            "kaspar.toml: sessions[0].children: expected at most 6 names, found 7",
+        ),
         ("[[sessions]]\ngroup = 'A'\nchildren = ['Sam', 'Sam']", "kaspar.toml: sessions[0].children: expected distinct names, found 'Sam' more than once"),
         ("[[sessions]]\ngroup = 'A'\nchildren = ['Sam']\ngroup_size = 2", "kaspar.toml: sessions[0].group_size: expected 1 (one per name in children), found 2"),
         ("[[sessions]]\ngroup = 'A'\nanswer_key = ['lion']", "kaspar.toml: sessions[0].answer_key: expected 6 toys (one per target: bag 1,"),

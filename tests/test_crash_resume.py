@@ -12,6 +12,13 @@ from pathlib import Path
 
 import pytest
 
+from kasparctl.game.records import (
+    PoseRecord,
+    SessionEvent,
+    SessionRecord,
+    StepRecord,
+    TrialRecord,
+)
 from kasparctl.game.session import RECORDS_FILE, read_records
 
 KILLS_WANTED = 22
@@ -82,13 +89,16 @@ def test_sigkill_at_many_points_then_resume_finishes_without_losing_a_trial(tmp_
     (session_dir,) = (tmp_path / "sessions").iterdir()
     read = read_records(session_dir / RECORDS_FILE)
     records = read.records
-    assert [r["seq"] for r in records] == list(range(1, len(records) + 1))
-    trials = [r for r in records if r["kind"] == "trial"]
-    assert [t["trial"] for t in trials] == list(range(1, summary["trials"] + 1))
-    resumes = [r for r in records if r["kind"] == "session" and r.get("event") == "resumed"]
+    assert read.warnings == []
+    assert [r.seq for r in records] == list(range(1, len(records) + 1))
+    trials = [r for r in records if isinstance(r, TrialRecord)]
+    assert [t.trial for t in trials] == list(range(1, summary["trials"] + 1))
+    resumes = [
+        r for r in records if isinstance(r, SessionRecord) and r.event is SessionEvent.RESUMED
+    ]
     assert len(resumes) >= 20
-    steps = [r["to"] for r in records if r["kind"] == "step"]
+    steps = [r.to for r in records if isinstance(r, StepRecord)]
     assert steps == ["placing", "teaching", "revealing", "guessing", "farewell", "finished"]
     # Every bag was taught in every round exactly once, whatever was interrupted.
-    rounds = [(r["round"], r["bag"]) for r in records if r["kind"] == "pose"]
+    rounds = [(r.round, r.bag) for r in records if isinstance(r, PoseRecord)]
     assert rounds == [(k, b) for k in range(3) for b in range(6)]

@@ -169,15 +169,19 @@ def test_watchdog_interval_is_half_of_watchdog_usec(monkeypatch: pytest.MonkeyPa
 
 
 def test_next_session_is_the_first_planned_group_not_finished(tmp_path: Path) -> None:
+    from kasparctl.config import GameSettings
     from kasparctl.game.session import Session
+    from kasparctl.game.state import GameState
+    from kasparctl.learning.learner import LearnerParams
     from kasparctl.service.daemon import Daemon, DaemonOptions
 
+    ended = GameState.new(GameSettings(), LearnerParams(), seed=1)
     example = Path(__file__).resolve().parents[1] / "systemd" / "kaspar.toml"  # groups A1, A2
     daemon = Daemon(DaemonOptions(str(example), sim=True, state_dir=str(tmp_path)), Notifier(""))
     assert daemon._next_plan().group == "A1"
     unfinished = Session.create(tmp_path, {"group": "A1"})
     assert daemon._next_plan().group == "A1"  # interrupted, not done
-    unfinished.save_state({}, finished=True)
+    unfinished.save_state(ended, finished=True)
     assert daemon._next_plan().group == "A2"
-    Session.create(tmp_path, {"group": "A2"}).save_state({}, finished=True)
+    Session.create(tmp_path, {"group": "A2"}).save_state(ended, finished=True)
     assert daemon._next_plan().group == "A2"  # all done: the last group plays again

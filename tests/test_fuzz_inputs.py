@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from kasparctl.config import Config, ConfigError, parse_config
 from kasparctl.game.phrases import PhraseBook, PhraseError, parse_phrasebook
-from kasparctl.game.session import TORN_SUFFIX, read_records
+from kasparctl.game.session import TORN_SUFFIX, read_json_lines, state_from_plain, state_to_plain
 from kasparctl.game.state import GameState, StateError
 
 REPO = Path(__file__).resolve().parents[1]
@@ -221,7 +221,7 @@ def _check_read(path: Path, data: bytes, repair: bool) -> tuple[list[dict[str, A
     path.write_bytes(data)
     torn = path.with_name(path.name + TORN_SUFFIX)
     torn.unlink(missing_ok=True)
-    result = read_records(path, repair=repair)
+    result = read_json_lines(path, repair=repair)
     assert all(isinstance(record, dict) for record in result.records)
     assert all(isinstance(warning, str) and str(path) in warning for warning in result.warnings)
     after = path.read_bytes()
@@ -290,12 +290,12 @@ def test_records_with_garbage_and_a_torn_tail(
         if repair:
             # Read again: the same records. (A bad line that the cut made the last
             # one is taken for a torn tail in its turn: moved aside, not lost.)
-            again = read_records(path, repair=True)
+            again = read_json_lines(path, repair=True)
             assert again.records == records
 
 
 def test_records_missing_file_is_empty(tmp_path: Path) -> None:
-    result = read_records(tmp_path / "absent.jsonl", repair=True)
+    result = read_json_lines(tmp_path / "absent.jsonl", repair=True)
     assert result.records == [] and result.warnings == []
 
 
@@ -323,7 +323,7 @@ def _valid_state() -> dict[str, Any]:
     from kasparctl.learning.learner import LearnerParams
 
     game = GameSettings()
-    return GameState.new(game, LearnerParams(), seed=1).to_plain()
+    return state_to_plain(GameState.new(game, LearnerParams(), seed=1))
 
 
 VALID_STATE = json.loads(json.dumps(_valid_state()))
@@ -371,15 +371,15 @@ def state_dicts(draw: st.DrawFn) -> dict[str, Any]:
 
 
 def test_the_valid_snapshot_restores() -> None:
-    state = GameState.from_plain(json.loads(json.dumps(VALID_STATE)))
-    assert state.to_plain()["step"] == "idle"
+    state = state_from_plain(json.loads(json.dumps(VALID_STATE)))
+    assert state_to_plain(state)["step"] == "idle"
 
 
 @settings(FUZZ, report_multiple_bugs=False)
 @given(state_dicts())
 def test_game_state_from_random_plain_data(data: dict[str, Any]) -> None:
     try:
-        state = GameState.from_plain(data)
+        state = state_from_plain(data)
     except StateError:
         pass
     else:
@@ -405,19 +405,19 @@ def _rng_state(**changes: Any) -> dict[str, Any]:
 def test_regression_state_rng_integer_out_of_range_is_a_state_error() -> None:
     # numpy's PCG64.state setter raises OverflowError for a negative "inc".
     with pytest.raises(StateError):
-        GameState.from_plain(_state_with(learner=_rng_state(inc=-1)))
+        state_from_plain(_state_with(learner=_rng_state(inc=-1)))
 
 
 def test_regression_state_poses_not_a_table_is_a_state_error() -> None:
     # data["poses"].items() on a list.
     with pytest.raises(StateError):
-        GameState.from_plain(_state_with(poses=[]))
+        state_from_plain(_state_with(poses=[]))
 
 
 def test_regression_state_previous_too_short_is_a_state_error() -> None:
     # previous[1] on a one-element list.
     with pytest.raises(StateError):
-        GameState.from_plain(_state_with(previous=[1]))
+        state_from_plain(_state_with(previous=[1]))
 
 
 def test_regression_state_mt19937_key_too_short_is_a_state_error() -> None:
@@ -425,7 +425,7 @@ def test_regression_state_mt19937_key_too_short_is_a_state_error() -> None:
     learner = json.loads(json.dumps(VALID_STATE["learner"]))
     learner["rng"] = {"bit_generator": "MT19937", "state": {"key": [1], "pos": 0}}
     with pytest.raises(StateError):
-        GameState.from_plain(_state_with(learner=learner))
+        state_from_plain(_state_with(learner=learner))
 
 
 def test_regression_state_naming_another_numpy_callable_is_a_state_error() -> None:
@@ -433,4 +433,4 @@ def test_regression_state_naming_another_numpy_callable_is_a_state_error() -> No
     learner = json.loads(json.dumps(VALID_STATE["learner"]))
     learner["rng"] = {"bit_generator": "seed", "state": {}}
     with pytest.raises(StateError, match="bit_generator: expected one of"):
-        GameState.from_plain(_state_with(learner=learner))
+        state_from_plain(_state_with(learner=learner))

@@ -16,8 +16,8 @@ from rig_events import on_event
 
 from hal.servos.api import FaultKind
 from kasparctl.config import Config
-from kasparctl.game.machine import STATES, TRANSITIONS
 from kasparctl.game.session import RECORDS_FILE
+from kasparctl.game.stages import STATES, TRANSITIONS
 from kasparctl.sim import simtime
 from kasparctl.sim.demo import DemoOptions, DemoResult, DemoRig, build, demo_config, with_variant
 from kasparctl.sim.teacher import Teacher
@@ -105,8 +105,8 @@ def test_names_game_runs_all_five_steps(tmp_path: Path) -> None:
         assert sum(trial["probabilities"]) == pytest.approx(1.0)
     # The last round's pose is the one Kaspar points with.
     assert "Kaspar points at bag 1" in out
-    assert rig.game.data is not None
-    assert rig.game.data.poses["bag 1"] == poses[12]["pose"]
+    assert rig.game.session_state is not None
+    assert rig.game.session_state.poses["bag 1"] == poses[12]["pose"]
 
 
 def test_trial_records_carry_everything_the_researchers_need(tmp_path: Path) -> None:
@@ -273,28 +273,39 @@ def test_pause_mid_question_and_resume_asks_the_same_question(tmp_path: Path) ->
 
 
 def test_every_command_where_it_applies_and_ignored_elsewhere(tmp_path: Path) -> None:
+    ignored_until: list[float] = []
+
     async def researcher(rig: DemoRig) -> None:
         assert rig.children is not None
         rig.game.listeners.remove(rig.children)
         keyfob = rig.keyfob
+
+        async def gesture(action: str, then: str | None = None) -> None:
+            """One gesture; with `then`, wait until the game has entered that stage."""
+            entered = on_event(rig, "state", lambda info: info["state"] == then)
+            await keyfob.perform(action)
+            if then is not None:
+                await entered
+
+        await on_event(rig, "waiting_for_researcher", lambda info: info["step"] == "idle")
         # idle: only "next" applies.
-        for action in ("long red", "double red", "both", "long green"):
-            await keyfob.perform(action)
-            await asyncio.sleep(1)
-        await asyncio.sleep(15)  # placing: pause, resume, then next
-        for action in ("double red", "long red", "long green", "long red", "long green"):
-            await keyfob.perform(action)
-            await asyncio.sleep(2)
-        await asyncio.sleep(15)  # teaching: next does not apply before the bags are taught
-        await keyfob.perform("long green")
-        await asyncio.sleep(2)
-        await keyfob.perform("both")  # stop applies everywhere
+        for action in ("long red", "double red", "both"):
+            await gesture(action)
+        ignored_until.append(asyncio.get_running_loop().time())
+        await gesture("long green", then="placing")
+        await gesture("double red")  # placing: no answer to undo
+        await gesture("long red", then="paused")
+        await gesture("long green")  # paused: next does not apply
+        await gesture("long red", then="placing")  # resume
+        await gesture("long green", then="teaching")
+        await gesture("long green")  # teaching: next does not apply before the bags are taught
+        await gesture("both", then="stopped")  # stop applies everywhere
 
     result, _, _ = play(tmp_path, scenario=researcher)
     records = records_of(result)
     # Before the session there is nothing to record in; the first record is its start,
     # after the three gestures that did not apply in idle.
-    assert records[0]["kind"] == "session" and records[0]["clock"] > 3.0
+    assert records[0]["kind"] == "session" and records[0]["clock"] >= ignored_until[0]
     commands = [(r["state"], r["command"], r["applied"]) for r in records if r["kind"] == "command"]
     assert commands == [
         ("idle", "next", True),
@@ -465,10 +476,11 @@ def test_a_session_resumed_before_its_first_step_carries_on_in_the_same_director
     """A crash between opening a session and its first step: the resume must not open another."""
     first, _, _ = play(tmp_path / "whole", config=config_for("pilot"), seed=12)
     plan = records_of(first)[0]["plan"]
+    from kasparctl.game.records import SessionEvent, SessionRecord
     from kasparctl.game.session import Session
 
     crashed = Session.create(tmp_path / "crashed", plan)
-    crashed.record("session", 0.0, event="start", plan=plan)
+    crashed.record(SessionRecord(event=SessionEvent.START, plan=plan), 0.0)
     crashed.close()
     resumed, _, out = play(tmp_path / "crashed", config=config_for("pilot"), seed=12)
     assert resumed.resumed and resumed.finished

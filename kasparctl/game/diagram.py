@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from transitions.extensions.diagrams import GraphMachine
 
-from kasparctl.game.machine import STATES, TRANSITIONS
+from kasparctl.game.stages import STATES, TRANSITIONS
 
 
 class _Model:
@@ -16,6 +16,7 @@ class _Model:
 
 
 def mermaid() -> str:
+    """The machine's states and transitions (with their conditions) as a mermaid diagram."""
     machine = GraphMachine(
         model=_Model(),
         states=list(STATES),

@@ -33,6 +33,7 @@ class PhraseError(Exception):
     """A phrase file that cannot be used, or a line asked for wrongly, with where and why."""
 
     def __init__(self, source: str, key: str, message: str) -> None:
+        """Where (file, phrase key) and what is wrong."""
         super().__init__(f"{source}: {key}: {message}")
         self.source = source
         self.key = key
@@ -129,6 +130,7 @@ class Band:
     max: float
 
     def contains(self, entropy_bits: float) -> bool:
+        """Whether `entropy_bits` falls in this band."""
         return self.min <= entropy_bits < self.max
 
 
@@ -146,9 +148,11 @@ class PhraseBook:
 
     @property
     def keys(self) -> tuple[str, ...]:
+        """Every phrase key of the book."""
         return tuple(self.lines)
 
     def variants(self, key: str) -> tuple[str, ...]:
+        """The lines `key` may be said with; PhraseError for a key the book lacks."""
         if key not in self.lines:
             self._fail(key, _unknown_key_message(key, self.lines))
         return self.lines[key]
@@ -234,11 +238,13 @@ class PhrasePicker:
     """
 
     def __init__(self, book: PhraseBook, rng: np.random.Generator) -> None:
+        """Pick from `book`, drawing with `rng`."""
         self.book = book
         self._rng = rng
         self._last: dict[str, int] = {}
 
     def line(self, key: str, /, **values: str) -> str:
+        """A variant of `key` filled in with `values`, not the one this picker said last."""
         variants = self.book.variants(key)
         # Validate before drawing, so a bad call neither consumes randomness nor memory.
         self.book.check_values(key, values)

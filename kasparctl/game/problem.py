@@ -33,6 +33,7 @@ class TargetProgress:
     learned: int | None = None
 
     def __post_init__(self) -> None:
+        """Refuse limits no target could meet."""
         if self.correct_answers_to_learn < 1:
             raise ProblemError(
                 f"correct_answers_to_learn: expected >= 1, found {self.correct_answers_to_learn}"
@@ -45,10 +46,12 @@ class TargetProgress:
 
     @property
     def done(self) -> bool:
+        """Learned or given up: no more guesses on this target."""
         return self.learned is not None or self.trials >= self.max_trials
 
     @property
     def given_up(self) -> bool:
+        """Not learned within max_trials guesses: left to the researcher."""
         return self.learned is None and self.trials >= self.max_trials
 
     def record(self, label: int, feedback: bool | None) -> bool:

@@ -14,6 +14,11 @@ last record it includes, and a resume replays any record written after it.
 A torn last line (a power cut in the middle of a write) is moved aside to
 records.jsonl.torn and cut from the log, with a warning: kept, never parsed
 as a record and never a crash. Files are private to the service's user.
+
+This module is the one place where records (kasparctl.game.records) and the
+snapshot (kasparctl.game.state.GameState) become bytes and back, with msgspec.
+A line that is JSON but not a record is reported with its file and line and
+left out; it never stops a reader.
 """
 
 from __future__ import annotations
@@ -24,10 +29,14 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import msgspec
 import structlog
+
+from kasparctl.game.records import AnyRecord, Record
+from kasparctl.game.state import GameState, StateError
+from kasparctl.learning.learner import PLAIN_DATA_ERRORS, LearnerState
 
 log = structlog.get_logger(__name__)
 
@@ -39,6 +48,7 @@ PRIVATE_FILE = 0o600
 PRIVATE_DIR = 0o700
 
 _encoder = msgspec.json.Encoder()
+RecordT = TypeVar("RecordT", bound=Record)
 
 
 class SessionError(Exception):
@@ -75,14 +85,26 @@ def _fsync_directory(directory: Path) -> None:
 
 
 @dataclass(frozen=True, slots=True)
-class RecordsRead:
+class JsonLines:
+    """The JSON objects of a log, one per whole line, as plain data."""
+
     records: list[dict[str, Any]]
     # Human-readable reasons for anything not taken as a record.
     warnings: list[str] = field(default_factory=list)
+    # The line number (from 1) of each record, in the same order.
+    lines: list[int] = field(default_factory=list)
 
 
-def read_records(path: Path, repair: bool = False) -> RecordsRead:
-    """Every whole record in a log. With `repair`, a torn tail is moved aside and cut.
+@dataclass(frozen=True, slots=True)
+class RecordsRead:
+    """The typed records of a log, and a warning (file and line) for each line left out."""
+
+    records: list[AnyRecord]
+    warnings: list[str] = field(default_factory=list)
+
+
+def read_json_lines(path: Path, repair: bool = False) -> JsonLines:
+    """Every whole JSON object of a log. With `repair`, a torn tail is moved aside and cut.
 
     A torn tail is the last line when it lacks its newline or is not JSON: the
     only damage a crash between write and fsync can do to an append-only file.
@@ -91,10 +113,11 @@ def read_records(path: Path, repair: bool = False) -> RecordsRead:
     try:
         data = path.read_bytes()
     except FileNotFoundError:
-        return RecordsRead([])
+        return JsonLines([])
     lines = data.split(b"\n")
     tail = lines.pop()  # after the last newline: b"" when the file ends cleanly
     records: list[dict[str, Any]] = []
+    numbers: list[int] = []
     warnings: list[str] = []
     good_end = 0
     position = 0
@@ -112,6 +135,7 @@ def read_records(path: Path, repair: bool = False) -> RecordsRead:
             good_end = position
             continue
         records.append(record)
+        numbers.append(number)
         good_end = position
     if tail:
         where = f"moved to {path.name}{TORN_SUFFIX}" if repair else "left in place, not read"
@@ -120,7 +144,97 @@ def read_records(path: Path, repair: bool = False) -> RecordsRead:
         )
         if repair:
             _move_torn_tail(path, tail, good_end)
+    return JsonLines(records, warnings, numbers)
+
+
+def read_records(path: Path, repair: bool = False) -> RecordsRead:
+    """Every record of a log, typed; torn and damaged lines as read_json_lines says.
+
+    A line that is JSON but no record this code knows (an unknown kind, a field
+    missing or of the wrong type) is left out with a warning naming the file and
+    the line, never a crash: a reader goes on with the records it can read.
+    """
+    lines = read_json_lines(path, repair)
+    records: list[AnyRecord] = []
+    warnings = list(lines.warnings)
+    for number, plain in zip(lines.lines, lines.records, strict=True):
+        try:
+            records.append(decode_record(plain))
+        except msgspec.ValidationError as error:
+            warnings.append(f"{path}: line {number}: skipped, not a valid record ({error})")
     return RecordsRead(records, warnings)
+
+
+def decode_record(plain: dict[str, Any]) -> AnyRecord:
+    """One record from its JSON object; msgspec.ValidationError when it is none."""
+    record: AnyRecord = msgspec.convert(plain, type=AnyRecord)
+    return record
+
+
+def record_to_plain(record: AnyRecord) -> dict[str, Any]:
+    """One record as its JSON object (plain data), "kind" included, absent fields left out."""
+    plain: dict[str, Any] = msgspec.to_builtins(record)
+    return plain
+
+
+def encode_record(record: AnyRecord) -> bytes:
+    """One record as its line of records.jsonl, without the newline."""
+    return _encoder.encode(record)
+
+
+# -- the snapshot ------------------------------------------------------------------
+
+
+class _SnapshotOut(msgspec.Struct):
+    seq: int
+    finished: bool
+    saved: str
+    state: dict[str, Any]
+
+
+class _SnapshotIn(msgspec.Struct):
+    seq: int
+    state: msgspec.Raw
+    finished: bool = False
+    saved: str = ""
+
+
+def _learner_is_given(wanted: type, value: Any) -> Any:
+    # Never called: state_from_plain passes the learner in already decoded.
+    raise NotImplementedError(f"cannot decode {wanted.__name__} from {type(value).__name__}")
+
+
+def state_to_plain(state: GameState) -> dict[str, Any]:
+    """The snapshot's "state" object as plain data (JSON-ready).
+
+    Every field by msgspec, but the learner: it has its own plain form
+    (LearnerState.to_plain, {"q": table, "rng": generator state}).
+    """
+    plain: dict[str, Any] = msgspec.to_builtins(msgspec.structs.replace(state, learner=None))
+    plain["learner"] = state.learner.to_plain()
+    return plain
+
+
+def state_from_plain(plain: Any) -> GameState:
+    """A GameState from its plain data; StateError if the data is not one."""
+    try:
+        if not isinstance(plain, dict):
+            raise TypeError(f"expected a JSON object, found {type(plain).__name__}")
+        learner = LearnerState.from_plain(plain["learner"])
+        return msgspec.convert(
+            {**plain, "learner": learner}, type=GameState, dec_hook=_learner_is_given
+        )
+    except (msgspec.ValidationError, *PLAIN_DATA_ERRORS) as error:
+        # (LearnerError is a ValueError: a bad learner table or generator lands here too.)
+        raise StateError(f"unusable game state snapshot: {error!r}") from error
+
+
+def _decode_state(raw: bytes) -> GameState:
+    try:
+        plain = msgspec.json.decode(raw)
+    except msgspec.DecodeError as error:
+        raise StateError(f"unusable game state snapshot: {error!r}") from error
+    return state_from_plain(plain)
 
 
 def _move_torn_tail(path: Path, tail: bytes, good_end: int) -> None:
@@ -140,14 +254,17 @@ class RecordLog:
     """Append-only JSON lines; `append` returns once the record is on disk."""
 
     def __init__(self, path: Path) -> None:
+        """Open (or create) the log at `path` for appending."""
         self.path = path
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, PRIVATE_FILE)
 
-    def append(self, record: dict[str, Any]) -> None:
-        _write_all(self._fd, _encoder.encode(record) + b"\n")
+    def append(self, line: bytes) -> None:
+        """Write one encoded record and its newline, and fsync."""
+        _write_all(self._fd, line + b"\n")
         os.fsync(self._fd)
 
     def close(self) -> None:
+        """Close the file; appending after this fails."""
         if self._fd >= 0:
             os.close(self._fd)
             self._fd = -1
@@ -161,6 +278,7 @@ class Session:
     """One group's session on disk: its plan, its records and its latest state."""
 
     def __init__(self, directory: Path, plan: dict[str, Any], last_seq: int) -> None:
+        """The session in `directory`; use create or open rather than this."""
         self.directory = directory
         self.plan = plan
         self.id: str = plan["session"]
@@ -197,32 +315,40 @@ class Session:
             plan = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
         except (OSError, msgspec.DecodeError) as error:
             raise SessionError(f"{directory / PLAN_FILE}: cannot read the plan: {error}") from error
-        read = read_records(directory / RECORDS_FILE, repair=True)
+        read = read_json_lines(directory / RECORDS_FILE, repair=True)
         for warning in read.warnings:
             log.warning("session records repaired", detail=warning)
-        last_seq = max((int(r.get("seq", 0)) for r in read.records), default=0)
+        # Every line that is JSON counts, a record or not: its seq is never given again.
+        last_seq = max((_seq(record) for record in read.records), default=0)
         return cls(directory, plan, last_seq), read.warnings
 
     # -- state ----------------------------------------------------------------
 
-    def load_state(self) -> tuple[dict[str, Any] | None, list[dict[str, Any]]]:
-        """The last snapshot's state, and the records written after it (to replay)."""
-        snapshot = self._read_snapshot()
-        included = int(snapshot["seq"]) if snapshot else 0
-        later = [
-            record
-            for record in read_records(self.directory / RECORDS_FILE).records
-            if int(record.get("seq", 0)) > included
-        ]
-        return (snapshot["state"] if snapshot else None), later
+    def load_state(self) -> tuple[GameState | None, list[AnyRecord]]:
+        """The last snapshot's state, and the records written after it (to replay).
 
-    def _read_snapshot(self) -> dict[str, Any] | None:
+        No snapshot, or one that cannot be read as a snapshot at all, gives None:
+        every record is then replayed. A snapshot whose state is damaged is a
+        StateError: its records may not be the ones it summarises.
+        """
+        snapshot = self._read_snapshot()
+        included = snapshot.seq if snapshot else 0
+        read = read_records(self.directory / RECORDS_FILE)
+        for warning in read.warnings:
+            log.warning("session record unreadable", detail=warning)
+        later = [record for record in read.records if record.seq > included]
+        return (_decode_state(snapshot.state) if snapshot else None), later
+
+    def _read_snapshot(self) -> _SnapshotIn | None:
         path = self.directory / STATE_FILE
         try:
-            snapshot = msgspec.json.decode(path.read_bytes())
+            return msgspec.json.decode(path.read_bytes(), type=_SnapshotIn)
         except FileNotFoundError:
             return None
         except (OSError, msgspec.DecodeError) as error:
+            if isinstance(error, msgspec.ValidationError):
+                log.error("session snapshot malformed, replaying all records", path=str(path))
+                return None
             # Atomic replacement makes this a disk fault, not a crash; the records
             # still hold everything, so start from them and say so.
             log.error(
@@ -231,39 +357,40 @@ class Session:
                 error=str(error),
             )
             return None
-        if not isinstance(snapshot, dict) or "seq" not in snapshot or "state" not in snapshot:
-            log.error("session snapshot malformed, replaying all records", path=str(path))
-            return None
-        return snapshot
 
-    def save_state(self, state: dict[str, Any], finished: bool = False) -> None:
-        snapshot = {"seq": self.last_seq, "finished": finished, "saved": _utc_now(), "state": state}
+    def save_state(self, state: GameState, finished: bool = False) -> None:
+        """Replace the snapshot with `state`, as of the last record written."""
+        snapshot = _SnapshotOut(self.last_seq, finished, _utc_now(), state_to_plain(state))
         write_atomic(self.directory / STATE_FILE, _encoder.encode(snapshot))
 
     @property
     def finished(self) -> bool:
+        """Whether the last snapshot says the session ended."""
         return is_finished(self.directory)
 
     # -- records --------------------------------------------------------------
 
-    def record(self, kind: str, clock: float, **fields: Any) -> dict[str, Any]:
-        """Append one record and return it once it is on disk."""
-        record = {
-            "seq": self.last_seq + 1,
-            "kind": kind,
-            "time": _utc_now(),
-            "clock": clock,
-            **fields,
-        }
-        self._log.append(record)
+    def record(self, record: RecordT, clock: float) -> RecordT:
+        """Append `record`, stamped with its seq, the time and `clock`; return it once on disk."""
+        stamped = msgspec.structs.replace(
+            record, seq=self.last_seq + 1, time=_utc_now(), clock=clock
+        )
+        self._log.append(_encoder.encode(stamped))
         self.last_seq += 1
-        return record
+        return stamped
 
-    def records(self) -> list[dict[str, Any]]:
+    def records(self) -> list[AnyRecord]:
+        """Every record on disk, typed (lines that are none are left out, as read_records says)."""
         return read_records(self.directory / RECORDS_FILE).records
 
     def close(self) -> None:
+        """Close the record log."""
         self._log.close()
+
+
+def _seq(plain: dict[str, Any]) -> int:
+    seq = plain.get("seq", 0)
+    return seq if isinstance(seq, int) and not isinstance(seq, bool) else 0
 
 
 def _sessions_dir(state_dir: Path) -> Path:
@@ -290,10 +417,10 @@ def session_dirs(state_dir: Path) -> Iterator[Path]:
 def is_finished(directory: Path) -> bool:
     """Whether a session's last snapshot says it ended (finished or stopped)."""
     try:
-        snapshot = msgspec.json.decode((directory / STATE_FILE).read_bytes())
+        snapshot = msgspec.json.decode((directory / STATE_FILE).read_bytes(), type=_SnapshotIn)
     except (OSError, msgspec.DecodeError):
         return False
-    return isinstance(snapshot, dict) and bool(snapshot.get("finished"))
+    return snapshot.finished
 
 
 def find_unfinished(state_dir: Path) -> Path | None:

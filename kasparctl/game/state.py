@@ -5,33 +5,58 @@ resumed session applies the records written after its last snapshot with the
 very same function. So the live path and the resume path cannot disagree, and
 the snapshot is only a cache of what the records already say.
 
-Records that change the state: "step", "pose", "trial", "undo", and a
-"command" that paused or resumed. Every other kind (presses, prompts, faults,
-HAL events) is history only.
+Records that change the state: step, pose, trial, undo, and a command that
+paused or resumed (kasparctl.game.records.STATE_CHANGING). Every other kind
+(presses, prompts, faults, HAL events) is history only. The snapshot is this
+struct as JSON, encoded and decoded by kasparctl.game.session.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
+import dataclasses
 
+import msgspec
 import numpy as np
 
 from kasparctl.config import GameSettings
 from kasparctl.game.problem import TargetProgress
-from kasparctl.learning.learner import PLAIN_DATA_ERRORS, LearnerParams, LearnerState
+from kasparctl.game.records import (
+    STATE_CHANGING,
+    AnyRecord,
+    CommandRecord,
+    Confirmation,
+    PoseRecord,
+    Record,
+    StepRecord,
+    TrialRecord,
+    UndoRecord,
+)
+from kasparctl.game.stages import STEPS
+from kasparctl.learning.learner import BoolArray, LearnerParams, LearnerState
+from kasparctl.vocabulary import Command
 
-# The game's steps in order; the pilot variant starts at "guessing".
-STEPS = ("placing", "teaching", "revealing", "guessing", "farewell")
-STATE_CHANGING = frozenset({"step", "pose", "trial", "undo", "command"})
+__all__ = ["STEPS", "GameState", "StateError", "UndoEntry", "restore"]
 
 
 class StateError(ValueError):
-    """A record that does not fit the state it is applied to (a corrupt or foreign log)."""
+    """A record that does not fit the state it is applied to, or a damaged snapshot."""
 
 
-@dataclass(slots=True)
-class GameState:
+class UndoEntry(msgspec.Struct, frozen=True):
+    """What the last answer changed, as it was before: what a double red puts back."""
+
+    trial: int
+    q_row: list[float]
+    progress: TargetProgress
+    offered: list[bool]
+    turn: int
+    target: int
+    previous: tuple[int, bool] | None
+
+
+class GameState(msgspec.Struct, eq=False):
+    """A session's progress: the step, the learner, each target's progress, the taught poses."""
+
     step: str  # "idle", one of STEPS, "finished" or "stopped"
     learner: LearnerState
     progress: list[TargetProgress]
@@ -40,24 +65,25 @@ class GameState:
     trials: int = 0  # trials recorded in this session; the next one is trials + 1
     turn: int = 0  # children answer in rotation: child (turn % group size)
     target: int = 0  # the target Kaspar is guessing
-    # The previous answered guess on the current target, for the paper's
-    # perseverative-error and win-shift flags.
+    # The previous answered guess on the current target (choice, green), for the
+    # paper's perseverative-error and win-shift flags.
     previous: tuple[int, bool] | None = None
-    poses: dict[str, dict[str, float]] = field(default_factory=dict)  # target -> joint degrees
+    poses: dict[str, dict[str, float]] = msgspec.field(default_factory=dict)  # target -> joints
     teach_round: int = 0
     teach_bag: int = 0
     # What the last child answer changed, so a double red can take it back.
-    undo: dict[str, Any] | None = None
+    undo: UndoEntry | None = None
     paused: bool = False
 
     @classmethod
-    def new(cls, game: GameSettings, params: LearnerParams, seed: int | None) -> GameState:
-        n_targets, n_labels = len(game.targets), len(game.toys)
+    def new(cls, settings: GameSettings, params: LearnerParams, seed: int | None) -> GameState:
+        """The state of a session that has not started: a fresh learner seeded with `seed`."""
+        n_targets, n_labels = len(settings.targets), len(settings.toys)
         return cls(
             step="idle",
             learner=LearnerState.fresh(n_targets, n_labels, params, seed),
             progress=[
-                TargetProgress(game.correct_answers_to_learn, game.max_trials_per_target)
+                TargetProgress(settings.correct_answers_to_learn, settings.max_trials_per_target)
                 for _ in range(n_targets)
             ],
             offered=[True] * n_labels,
@@ -66,30 +92,39 @@ class GameState:
     # -- questions the game asks ------------------------------------------------
 
     @property
-    def candidates(self) -> np.ndarray:
+    def candidates(self) -> BoolArray:
+        """The labels still offered, as the learner's candidate mask."""
         return np.array(self.offered, dtype=bool)
 
     @property
     def all_done(self) -> bool:
+        """Every target learned or given up: step 4 is over."""
         return all(progress.done for progress in self.progress)
 
     def first_open_target(self) -> int | None:
+        """The first target neither learned nor given up, if any."""
         return next((i for i, progress in enumerate(self.progress) if not progress.done), None)
+
+    def bags_taught(self, settings: GameSettings) -> bool:
+        """Whether every target has a taught pose (step 2 can end)."""
+        return all(target in self.poses for target in settings.targets)
 
     # -- the one mutator --------------------------------------------------------
 
-    def apply(self, record: dict[str, Any], game: GameSettings) -> None:
-        kind = record.get("kind")
-        if kind == "step":
-            self._apply_step(str(record["to"]))
-        elif kind == "pose":
-            self._apply_pose(record, game)
-        elif kind == "trial":
-            self._apply_trial(record, game)
-        elif kind == "undo":
+    def apply(self, record: Record, settings: GameSettings) -> None:
+        """Change the state as `record` says; a record that changes nothing is ignored."""
+        if isinstance(record, StepRecord):
+            self._apply_step(record.to)
+        elif isinstance(record, PoseRecord):
+            self._apply_pose(record, settings)
+        elif isinstance(record, TrialRecord):
+            self._apply_trial(record, settings)
+        elif isinstance(record, UndoRecord):
             self._apply_undo(record)
-        elif kind == "command" and record.get("applied") and record.get("command") == "pause":
-            self.paused = record.get("confirm") == "pause"
+        elif (
+            isinstance(record, CommandRecord) and record.applied and record.command is Command.PAUSE
+        ):
+            self.paused = record.confirm == Confirmation.PAUSE
 
     def _apply_step(self, step: str) -> None:
         self.step = step
@@ -97,132 +132,66 @@ class GameState:
             open_target = self.first_open_target()
             self.target = self.target if open_target is None else open_target
 
-    def _apply_pose(self, record: dict[str, Any], game: GameSettings) -> None:
-        bag = int(record["bag"])
-        self.poses[game.targets[bag]] = {str(k): float(v) for k, v in record["pose"].items()}
-        self.teach_bag = bag + 1
-        if self.teach_bag >= len(game.targets):
+    def _apply_pose(self, record: PoseRecord, settings: GameSettings) -> None:
+        self.poses[settings.targets[record.bag]] = dict(record.pose)
+        self.teach_bag = record.bag + 1
+        if self.teach_bag >= len(settings.targets):
             self.teach_bag = 0
             self.teach_round += 1
 
-    def _apply_trial(self, record: dict[str, Any], game: GameSettings) -> None:
-        target, choice = int(record["target_index"]), int(record["choice_index"])
-        green = record["feedback"] == "green"
+    def _apply_trial(self, record: TrialRecord, settings: GameSettings) -> None:
+        target, choice = record.target_index, record.choice_index
         if target != self.target:
             raise StateError(
-                f"trial {record.get('trial')}: for target {target}, state is at {self.target}"
+                f"trial {record.trial}: for target {target}, state is at {self.target}"
             )
-        self.undo = {
-            "trial": int(record["trial"]),
-            "q_row": self.learner.table[target].tolist(),
-            "progress": _progress_plain(self.progress[target]),
-            "offered": list(self.offered),
-            "turn": self.turn,
-            "target": self.target,
-            "previous": self.previous,
-        }
-        self.learner.table[target] = np.array(record["q_after"], dtype=np.float64)
+        self.undo = UndoEntry(
+            trial=record.trial,
+            q_row=self.learner.table[target].tolist(),
+            progress=dataclasses.replace(self.progress[target]),
+            offered=list(self.offered),
+            turn=self.turn,
+            target=self.target,
+            previous=self.previous,
+        )
+        self.learner.table[target] = np.array(record.q_after, dtype=np.float64)
         # The generator as it was after this guess's draw, so a resume draws on from there.
-        self.learner.rng.bit_generator.state = record["learner_rng"]
-        self.trials = int(record["trial"])
+        self.learner.rng.bit_generator.state = record.learner_rng
+        self.trials = record.trial
         self.turn += 1
         progress = self.progress[target]
-        learned_now = progress.record(choice, green)
-        self.previous = (choice, green)
+        learned_now = progress.record(choice, record.green)
+        self.previous = (choice, record.green)
         if progress.done:
-            if learned_now and game.exclude_learned:
+            if learned_now and settings.exclude_learned:
                 self.offered[choice] = False
             self.previous = None
             next_target = self.first_open_target()
             self.target = self.target if next_target is None else next_target
 
-    def _apply_undo(self, record: dict[str, Any]) -> None:
-        if self.undo is None or self.undo["trial"] != int(record["trial"]):
-            raise StateError(f"undo of trial {record.get('trial')}: it is not the last answer")
+    def _apply_undo(self, record: UndoRecord) -> None:
         undo = self.undo
-        target = int(undo["target"])
-        self.learner.table[target] = np.array(undo["q_row"], dtype=np.float64)
-        self.progress[target] = TargetProgress(**undo["progress"])
-        self.offered = list(undo["offered"])
-        self.turn = int(undo["turn"])
-        self.target = target
-        self.previous = None if undo["previous"] is None else tuple(undo["previous"])  # type: ignore[assignment]
+        if undo is None or undo.trial != record.trial:
+            raise StateError(f"undo of trial {record.trial}: it is not the last answer")
+        self.learner.table[undo.target] = np.array(undo.q_row, dtype=np.float64)
+        self.progress[undo.target] = dataclasses.replace(undo.progress)
+        self.offered = list(undo.offered)
+        self.turn = undo.turn
+        self.target = undo.target
+        self.previous = undo.previous
         self.undo = None
-
-    # -- plain data -------------------------------------------------------------
-
-    def to_plain(self) -> dict[str, Any]:
-        return {
-            "step": self.step,
-            "learner": self.learner.to_plain(),
-            "progress": [_progress_plain(p) for p in self.progress],
-            "offered": list(self.offered),
-            "trials": self.trials,
-            "turn": self.turn,
-            "target": self.target,
-            "previous": None if self.previous is None else list(self.previous),
-            "poses": {target: dict(pose) for target, pose in self.poses.items()},
-            "teach_round": self.teach_round,
-            "teach_bag": self.teach_bag,
-            # Built by _apply_trial from fresh lists and never changed in place.
-            "undo": None if self.undo is None else dict(self.undo),
-            "paused": self.paused,
-        }
-
-    @classmethod
-    def from_plain(cls, data: dict[str, Any]) -> GameState:
-        try:
-            previous = data["previous"]
-            if previous is not None and len(previous) != 2:
-                raise ValueError(f"previous: expected [choice, green], found {previous!r}")
-            if not isinstance(data["poses"], dict):
-                raise TypeError(f"poses: expected a table, found {data['poses']!r}")
-            return cls(
-                step=str(data["step"]),
-                learner=LearnerState.from_plain(data["learner"]),
-                progress=[TargetProgress(**p) for p in data["progress"]],
-                offered=[bool(x) for x in data["offered"]],
-                trials=int(data["trials"]),
-                turn=int(data["turn"]),
-                target=int(data["target"]),
-                previous=None if previous is None else (int(previous[0]), bool(previous[1])),
-                poses={str(k): dict(v) for k, v in data["poses"].items()},
-                teach_round=int(data["teach_round"]),
-                teach_bag=int(data["teach_bag"]),
-                undo=data["undo"],
-                paused=bool(data["paused"]),
-            )
-        except PLAIN_DATA_ERRORS as error:
-            # (LearnerError is a ValueError: a bad learner table or generator lands here too.)
-            raise StateError(f"unusable game state snapshot: {error!r}") from error
-
-
-def _progress_plain(progress: TargetProgress) -> dict[str, Any]:
-    # dataclasses.asdict deep-copies field by field: too slow for a snapshot per record.
-    return {
-        "correct_answers_to_learn": progress.correct_answers_to_learn,
-        "max_trials": progress.max_trials,
-        "trials": progress.trials,
-        "streak": progress.streak,
-        "streak_label": progress.streak_label,
-        "learned": progress.learned,
-    }
 
 
 def restore(
-    snapshot: dict[str, Any] | None,
-    later_records: list[dict[str, Any]],
-    game: GameSettings,
+    snapshot: GameState | None,
+    later_records: list[AnyRecord],
+    settings: GameSettings,
     params: LearnerParams,
     seed: int | None,
 ) -> GameState:
     """The state a session had reached: its snapshot plus the records written after it."""
-    state = (
-        GameState.from_plain(snapshot)
-        if snapshot is not None
-        else GameState.new(game, params, seed)
-    )
+    state = snapshot if snapshot is not None else GameState.new(settings, params, seed)
     for record in later_records:
-        if record.get("kind") in STATE_CHANGING:
-            state.apply(record, game)
+        if isinstance(record, STATE_CHANGING):
+            state.apply(record, settings)
     return state

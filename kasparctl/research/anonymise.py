@@ -14,7 +14,10 @@ from typing import Any
 
 
 class Pseudonyms:
+    """Replaces each first name by its pseudonym, as a whole word."""
+
     def __init__(self, names: Mapping[str, str]) -> None:
+        """`names`: each first name and its pseudonym."""
         self._names = dict(names)
         # Longest first, so "Anna-Lena" is replaced before "Anna".
         ordered = sorted(self._names, key=len, reverse=True)
@@ -25,6 +28,7 @@ class Pseudonyms:
         )
 
     def text(self, value: str) -> str:
+        """`value` with every name replaced."""
         if self._pattern is None:
             return value
         return self._pattern.sub(lambda match: self._names[match.group(1)], value)

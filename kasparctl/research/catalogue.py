@@ -15,8 +15,15 @@ from typing import Any
 
 import msgspec
 
+from kasparctl.game.records import (
+    AnyRecord,
+    SessionEvent,
+    SessionRecord,
+    StepRecord,
+    TrialRecord,
+    UndoRecord,
+)
 from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, read_records, session_dirs
-from kasparctl.learning.session_stats import undone_trials
 
 
 class CatalogueError(Exception):
@@ -25,40 +32,49 @@ class CatalogueError(Exception):
 
 @dataclass(frozen=True)
 class SessionData:
+    """One recorded session: its plan.json, its typed records, and what could not be read."""
+
     directory: Path
     # plan.json as the robot wrote it: session, created, group, condition, variant, seed, plan.
     meta: dict[str, Any]
-    records: list[dict[str, Any]]
+    records: list[AnyRecord]
     # Lines of records.jsonl that were not whole records, one message each.
     warnings: list[str] = field(default_factory=list)
 
     @property
     def id(self) -> str:
+        """The session's id (its directory's name)."""
         return str(self.meta.get("session", self.directory.name))
 
     @property
     def plan(self) -> dict[str, Any]:
+        """The session's plan entry as the robot used it."""
         return dict(self.meta.get("plan") or {})
 
     @property
     def group(self) -> str:
+        """The group's code."""
         return str(self.meta.get("group", self.plan.get("group", "")))
 
     @property
     def profile(self) -> str:
+        """The learner profile's name."""
         return str(self.plan.get("profile", "paper"))
 
     @property
     def speak_uncertainty(self) -> bool:
+        """Whether Kaspar said how sure it was."""
         return bool(self.plan.get("speak_uncertainty", True))
 
     @property
     def condition(self) -> str:
+        """profile/spoken or profile/silent."""
         spoken = "spoken" if self.speak_uncertainty else "silent"
         return str(self.meta.get("condition") or f"{self.profile}/{spoken}")
 
     @property
     def variant(self) -> str:
+        """The game variant: "names" or "pilot"."""
         return str(self.meta.get("variant", ""))
 
     @property
@@ -75,48 +91,55 @@ class SessionData:
 
     @property
     def created(self) -> str:
+        """When the session was opened, UTC ISO 8601."""
         return str(self.meta.get("created", ""))
 
     @property
     def date(self) -> str:
+        """The day the session was opened, YYYY-MM-DD."""
         return self.created[:10]
 
     @property
     def children(self) -> tuple[str, ...]:
+        """The first names in the plan, if any."""
         return tuple(self.plan.get("children") or ())
 
     @property
     def answer_key(self) -> tuple[str, ...]:
+        """The right toy of each target, if the plan has a key."""
         return tuple(self.plan.get("answer_key") or ())
 
     @cached_property
     def undone(self) -> frozenset[int]:
-        return frozenset(undone_trials(self.records))
+        """The numbers of the trials whose answers the researcher took back."""
+        return frozenset(r.trial for r in self.records if isinstance(r, UndoRecord))
 
     @cached_property
-    def all_trials(self) -> list[dict[str, Any]]:
+    def all_trials(self) -> list[TrialRecord]:
         """Every trial record, undone ones included, in the order they were recorded."""
-        return [r for r in self.records if r.get("kind") == "trial"]
+        return [r for r in self.records if isinstance(r, TrialRecord)]
 
     @cached_property
-    def trials(self) -> list[dict[str, Any]]:
+    def trials(self) -> list[TrialRecord]:
         """The trials that count: an answer taken back with undo is not one."""
-        return [r for r in self.all_trials if int(r["trial"]) not in self.undone]
+        return [r for r in self.all_trials if r.trial not in self.undone]
 
     @property
     def status(self) -> str:
         """ "finished", "stopped" (the researcher's stop) or "interrupted" (never ended)."""
         last_step = None
         for record in self.records:
-            if record.get("kind") == "step":
-                last_step = record.get("to")
+            if isinstance(record, StepRecord):
+                last_step = record.to
         return last_step if last_step in ("finished", "stopped") else "interrupted"
 
     @property
     def resumed(self) -> int:
         """How many times the robot carried this session on after a crash or restart."""
         return sum(
-            1 for r in self.records if r.get("kind") == "session" and r.get("event") == "resumed"
+            1
+            for r in self.records
+            if isinstance(r, SessionRecord) and r.event is SessionEvent.RESUMED
         )
 
     @cached_property
@@ -129,15 +152,13 @@ class SessionData:
         """
         width = 0
         for trial in self.all_trials:
-            candidates = list(trial.get("candidates") or ())
-            width = max(width, len(trial.get("probabilities") or ()))
-            if candidates and len(candidates) == len(trial.get("probabilities") or ()):
-                return tuple(str(toy) for toy in candidates)
+            width = max(width, len(trial.probabilities))
+            if trial.candidates and len(trial.candidates) == len(trial.probabilities):
+                return tuple(trial.candidates)
         names = [f"toy {index + 1}" for index in range(width)]
         for trial in self.all_trials:
-            index = trial.get("choice_index")
-            if isinstance(index, int) and 0 <= index < width:
-                names[index] = str(trial.get("choice"))
+            if 0 <= trial.choice_index < width:
+                names[trial.choice_index] = trial.choice
         return tuple(names)
 
     def first_names(self) -> dict[str, str]:
@@ -146,6 +167,7 @@ class SessionData:
 
 
 def load_session(directory: Path) -> SessionData:
+    """A session directory read back; a line that is no record is a warning, not an error."""
     try:
         meta = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
     except (OSError, msgspec.DecodeError) as error:

@@ -10,10 +10,10 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
 
+from kasparctl.game.records import TrialRecord
 from kasparctl.learning.learner import LearnerParams
-from kasparctl.learning.session_stats import problems_from_records
+from kasparctl.learning.session_stats import problems_from_trials
 from kasparctl.learning.study_stats import ProblemRecord, StudyStats, summarise
 from kasparctl.research.catalogue import SessionData
 
@@ -27,31 +27,37 @@ class Problem:
 
     @property
     def answer(self) -> str | None:
+        """The right toy's name, where the plan had an answer key."""
         return None if self.record.answer is None else self.toys[self.record.answer]
 
 
 @dataclass
 class Condition:
+    """The sessions of one condition and their problems."""
+
     label: str
     sessions: list[SessionData] = field(default_factory=list)
     problems: list[Problem] = field(default_factory=list)
 
     @cached_property
     def stats(self) -> StudyStats:
+        """The paper's statistics over this condition's problems."""
         # The paper's statistics, computed by the simulator's own code.
         return summarise([problem.record for problem in self.problems])
 
     @property
-    def trials(self) -> list[dict[str, Any]]:
+    def trials(self) -> list[TrialRecord]:
         """Trials that count (not undone), over every session."""
         return [trial for session in self.sessions for trial in session.trials]
 
     @property
     def undone(self) -> int:
+        """How many answers were taken back, over every session."""
         return sum(len(s.all_trials) - len(s.trials) for s in self.sessions)
 
 
 def condition_labels(sessions: Sequence[SessionData]) -> list[str]:
+    """Each session's condition label; with the variant when the sessions mix variants."""
     mixed = len({session.variant for session in sessions}) > 1
     return [
         f"{session.condition} ({session.variant})" if mixed else session.condition
@@ -72,8 +78,8 @@ def by_condition(
         toys = session.toys
         # An answer key naming a toy the session never offered cannot be used.
         answer_key = session.answer_key if set(session.answer_key) <= set(toys) else ()
-        records = problems_from_records(
-            session.records, toys, answer_key, params(session.profile), group=index
+        records = problems_from_trials(
+            session.trials, toys, answer_key, params(session.profile), group=index
         )
         condition.problems.extend(Problem(toys, record) for record in records)
     return [conditions[label] for label in sorted(conditions)]

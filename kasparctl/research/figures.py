@@ -246,10 +246,10 @@ def feedback_by_child(conditions: Sequence[Condition]) -> tuple[Any, str]:
     for condition in conditions:
         counting: dict[int, list[int]] = {}
         for trial in condition.trials:
-            if trial.get("feedback_right") is None:
+            if trial.feedback_right is None:
                 continue
-            entry = counting.setdefault(int(trial["child_index"]) + 1, [0, 0])
-            entry[0] += bool(trial["feedback_right"])
+            entry = counting.setdefault(trial.child_index + 1, [0, 0])
+            entry[0] += trial.feedback_right
             entry[1] += 1
         tallies.append({child: (right, total) for child, (right, total) in counting.items()})
     if not any(tallies):

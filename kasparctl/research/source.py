@@ -29,6 +29,7 @@ class SourceError(Exception):
 
 
 def add_source_arguments(parser: argparse.ArgumentParser, sessions: bool = True) -> None:
+    """Add SESSION..., --state-dir and --config to a research command's parser."""
     if sessions:
         parser.add_argument(
             "sessions",
@@ -49,6 +50,8 @@ def add_source_arguments(parser: argparse.ArgumentParser, sessions: bool = True)
 
 @dataclass(frozen=True)
 class Source:
+    """Where the sessions are, and the configuration whose learner profiles apply."""
+
     state_dir: Path | None
     config: Config | None
 
@@ -65,6 +68,7 @@ class Source:
 
 
 def resolve_source(arguments: argparse.Namespace, needs_state_dir: bool = True) -> Source:
+    """The source the arguments name, by the module's two rules; SourceError if there is none."""
     config = None
     if arguments.config is not None:
         config = _load(arguments.config)

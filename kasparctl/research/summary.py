@@ -19,15 +19,15 @@ from kasparctl.research.conditions import Condition, pooled
 
 def feedback_counts(condition: Condition) -> dict[str, Any]:
     """Children's answers checked against the answer key, where the plan has one."""
-    checked = [t for t in condition.trials if t.get("feedback_right") is not None]
+    checked = [t for t in condition.trials if t.feedback_right is not None]
     by_child: dict[int, list[bool]] = {}
     for trial in checked:
-        by_child.setdefault(int(trial["child_index"]) + 1, []).append(bool(trial["feedback_right"]))
+        by_child.setdefault(trial.child_index + 1, []).append(bool(trial.feedback_right))
     return {
         "feedback_checked": len(checked),
         # A green for a wrong guess teaches the wrong toy; a red for a right one delays it.
-        "wrong_green": sum(1 for t in checked if t["feedback"] == "green" and not t["correct"]),
-        "wrong_red": sum(1 for t in checked if t["feedback"] == "red" and t["correct"]),
+        "wrong_green": sum(1 for t in checked if t.green and not t.correct),
+        "wrong_red": sum(1 for t in checked if not t.green and t.correct),
         "feedback_by_child": [
             {"child": child, "checked": len(rights), "right": sum(rights)}
             for child, rights in sorted(by_child.items())
@@ -36,6 +36,7 @@ def feedback_counts(condition: Condition) -> dict[str, Any]:
 
 
 def condition_summary(condition: Condition) -> dict[str, Any]:
+    """One condition's column of the summary: sessions, problems, statistics, feedback."""
     sessions = condition.sessions
     return {
         "condition": condition.label,
@@ -55,6 +56,7 @@ def condition_summary(condition: Condition) -> dict[str, Any]:
 
 
 def build_summary(conditions: Sequence[Condition]) -> dict[str, Any]:
+    """The report's summary.json: every condition, and all of them pooled."""
     return {
         "sessions": [s.id for c in conditions for s in c.sessions],
         "conditions": [condition_summary(c) for c in conditions],
@@ -63,6 +65,7 @@ def build_summary(conditions: Sequence[Condition]) -> dict[str, Any]:
 
 
 def write_json(path: Path, summary: dict[str, Any]) -> None:
+    """Write the summary as indented JSON."""
     path.write_bytes(msgspec.json.format(msgspec.json.encode(summary), indent=2) + b"\n")
 
 
@@ -134,6 +137,7 @@ def _rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
 
 
 def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[str]) -> str:
+    """The report's summary.md: the conditions side by side, then the figures and notes."""
     columns = list(summary["conditions"])
     if len(columns) > 1:
         columns.append(summary["all"])

@@ -18,12 +18,11 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TextIO
 
+from kasparctl.game.records import TrialRecord
+from kasparctl.game.session import record_to_plain
 from kasparctl.research.anonymise import NO_PSEUDONYMS, Pseudonyms
 from kasparctl.research.catalogue import SessionData
 from kasparctl.research.progress import progress
-
-# Per-toy lists in a trial record, and the column prefix each becomes.
-PER_TOY = (("probabilities", "p_"), ("q_before", "q_before_"), ("q_after", "q_after_"))
 
 # Fields of a record that are bookkeeping, not the event: in their own columns or nowhere.
 # learner_rng is the learner's generator state, internal to resuming.
@@ -38,6 +37,7 @@ def snake(name: str) -> str:
 
 
 def cell(value: Any) -> str:
+    """A value as a CSV cell: empty for None, TRUE/FALSE, floats in full, lists joined by ";"."""
     if value is None:
         return ""
     if isinstance(value, bool):
@@ -67,6 +67,7 @@ def toy_columns(sessions: Sequence[SessionData]) -> dict[str, str]:
 
 
 def trial_header(toys: dict[str, str]) -> list[str]:
+    """The trials CSV's columns, a column per toy for the per-toy values."""
     def per_toy(prefix: str) -> list[str]:
         return [prefix + suffix for suffix in toys.values()]
 
@@ -111,45 +112,40 @@ def trial_rows(
     names = Pseudonyms(session.first_names()) if anonymise else NO_PSEUDONYMS
     answer_key = session.answer_key
     for trial in session.all_trials:
-        target_index = trial.get("target_index")
-        child_index = trial.get("child_index")
+        target_index, child_index = trial.target_index, trial.child_index
         row: dict[str, Any] = {
             **session.identity,
-            "trial": trial.get("trial"),
-            "problem_trial": trial.get("problem_trial"),
-            "target": trial.get("target"),
-            "answer": (
-                answer_key[target_index]
-                if isinstance(target_index, int) and 0 <= target_index < len(answer_key)
-                else None
-            ),
-            "child": (
-                f"child {child_index + 1}"
-                if anonymise and isinstance(child_index, int)
-                else names.text(str(trial.get("child", "")))
-            ),
-            "child_number": child_index + 1 if isinstance(child_index, int) else None,
-            "candidates": trial.get("candidates"),
-            "entropy": trial.get("entropy"),
-            "band": trial.get("band"),
-            "spoken": names.text(" ".join(trial.get("spoken") or ())) or None,
-            "choice": trial.get("choice"),
-            "feedback": trial.get("feedback"),
-            "reaction_time": trial.get("reaction_time"),
-            "reward": trial.get("reward"),
-            "perseverative": trial.get("perseverative"),
-            "win_shift": trial.get("win_shift"),
-            "correct": trial.get("correct"),
-            "feedback_right": trial.get("feedback_right"),
-            "learned": trial.get("learned"),
-            "undone": int(trial["trial"]) in session.undone,
-            "time": trial.get("time"),
+            "trial": trial.trial,
+            "problem_trial": trial.problem_trial,
+            "target": trial.target,
+            "answer": answer_key[target_index] if 0 <= target_index < len(answer_key) else None,
+            "child": f"child {child_index + 1}" if anonymise else names.text(trial.child),
+            "child_number": child_index + 1,
+            "candidates": trial.candidates,
+            "entropy": trial.entropy,
+            "band": trial.band,
+            "spoken": names.text(" ".join(trial.spoken)) or None,
+            "choice": trial.choice,
+            "feedback": trial.feedback,
+            "reaction_time": trial.reaction_time,
+            "reward": trial.reward,
+            "perseverative": trial.perseverative,
+            "win_shift": trial.win_shift,
+            "correct": trial.correct,
+            "feedback_right": trial.feedback_right,
+            "learned": trial.learned,
+            "undone": trial.trial in session.undone,
+            "time": trial.time,
         }
-        for field, prefix in PER_TOY:
-            values = trial.get(field) or ()
+        for prefix, values in _per_toy(trial):
             for toy, value in zip(session.toys, values, strict=False):
                 row[prefix + toys[toy]] = value
         yield row
+
+
+def _per_toy(trial: TrialRecord) -> tuple[tuple[str, list[float]], ...]:
+    """The per-toy lists of a trial, each with the prefix of its columns."""
+    return (("p_", trial.probabilities), ("q_before_", trial.q_before), ("q_after_", trial.q_after))
 
 
 EVENT_HEADER = [
@@ -181,10 +177,12 @@ def event_rows(session: SessionData, anonymise: bool = False) -> Iterator[dict[s
     """Every record that is not a trial: commands, presses, prompts, faults, HAL events,
     steps, poses, undos and the session's start and resumes."""
     names = Pseudonyms(session.first_names()) if anonymise else NO_PSEUDONYMS
-    for record in session.records:
-        kind = record.get("kind")
-        if kind == "trial":
+    for typed in session.records:
+        if isinstance(typed, TrialRecord):
             continue
+        # One table for every kind: each record as the plain object it is on disk.
+        record = record_to_plain(typed)
+        kind = record.get("kind")
         detail = {
             key: value
             for key, value in record.items()
@@ -247,6 +245,7 @@ def write_trials(path: Path | str, sessions: Sequence[SessionData], anonymise: b
 
 
 def write_events(path: Path | str, sessions: Sequence[SessionData], anonymise: bool) -> int:
+    """The events CSV (every record that is not a trial); returns the number of rows."""
     return _write(
         path,
         EVENT_HEADER,

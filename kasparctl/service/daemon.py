@@ -31,11 +31,13 @@ import msgspec
 import numpy as np
 import structlog
 
-from hal.build import BuiltHardware, build
+from hal import Hardware
+from hal.build import build
 from hal.clock import LoopClock
 from hal.errors import HalError
 from kasparctl.config import Config, SessionPlan, load_config
-from kasparctl.game.machine import Game, Hardware
+from kasparctl.game.events import GameEvent
+from kasparctl.game.machine import Game
 from kasparctl.game.phrases import PhrasePicker, load_phrasebook
 from kasparctl.game.session import PLAN_FILE, Session, find_unfinished, is_finished, session_dirs
 from kasparctl.game.state import GameState, restore
@@ -65,17 +67,22 @@ DEBUG_BLOCK_ENV = "KASPAR_DEBUG_LOOP_BLOCK_S"
 
 @dataclass
 class DaemonOptions:
+    """How the service was started: its configuration, simulated hardware, another state dir."""
+
     config_path: str
     sim: bool = False
     state_dir: str | None = None
 
 
 class Daemon:
+    """The service: the hardware, one session after another, systemd's notifications, stopping."""
+
     def __init__(self, options: DaemonOptions, notifier: Notifier | None = None) -> None:
+        """Load the configuration; nothing is opened until run()."""
         self.options = options
         self.config = self._load()
         self.notifier = notifier or Notifier()
-        self.hw: BuiltHardware | None = None
+        self.hw: Hardware | None = None
         self.game: Game | None = None
         self._stopping = asyncio.Event()
         self._stop_reason = ""
@@ -89,11 +96,13 @@ class Daemon:
 
     @property
     def state_dir(self) -> Path:
+        """Where sessions are kept (the configuration's, or the one given at the start)."""
         return Path(self.config.state_dir)
 
     # -- the service ---------------------------------------------------------------
 
     async def run(self) -> int:
+        """Run until SIGTERM or SIGINT; returns the exit status (0)."""
         faulthandler.enable()  # a watchdog abort leaves every thread's stack in the journal
         loop = asyncio.get_running_loop()
         for signum in (signal.SIGTERM, signal.SIGINT):
@@ -125,6 +134,7 @@ class Daemon:
         return 0
 
     def request_stop(self, reason: str) -> None:
+        """Stop the service: the session is left to resume, Kaspar goes to rest."""
         if not self._stopping.is_set():
             self._stop_reason = reason
             self.notifier.stopping(f"stopping ({reason})")
@@ -149,11 +159,10 @@ class Daemon:
         resumed = self._resume()
         book = load_phrasebook(self.config.language, self.config.phrases_dir)
         picker = PhrasePicker(book, np.random.default_rng())
-        hardware = Hardware(self.hw.servos, self.hw.keyfob, self.hw.voice)
-        game = Game(self.config, hardware, picker, self._open_session, resumed)
+        game = Game(self.config, self.hw, picker, self._open_session, resumed)
         game.listeners.append(self._on_game_event)
         self.game = game
-        self.notifier.status(STATUS_WORDS.get(game.state, game.state))
+        self.notifier.status(STATUS_WORDS.get(game.stage, game.stage))
         playing = asyncio.create_task(game.run(), name="game")
         stopping = asyncio.create_task(self._stopping.wait())
         await asyncio.wait({playing, stopping}, return_when=asyncio.FIRST_COMPLETED)
@@ -170,8 +179,8 @@ class Daemon:
         if self._reload:
             self._apply_reload()
 
-    def _on_game_event(self, event: str, info: dict[str, Any]) -> None:
-        if event == "state":
+    def _on_game_event(self, event: GameEvent, info: dict[str, Any]) -> None:
+        if event is GameEvent.STATE:
             self.notifier.status(STATUS_WORDS.get(info["state"], info["state"]))
 
     # -- sessions --------------------------------------------------------------------
@@ -297,6 +306,7 @@ class Daemon:
 
 
 def run_daemon(options: DaemonOptions) -> int:
+    """`kasparctl run`: the service in the foreground, logging as configured."""
     daemon = Daemon(options)
     configure_logging(daemon.config.logging.level, daemon.config.logging.format)
     return asyncio.run(daemon.run())

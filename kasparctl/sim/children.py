@@ -18,6 +18,8 @@ import numpy as np
 
 from hal.keyfob.sim import SimKeyfob
 from hal.servos.settings import ServoSettings
+from kasparctl.game.events import GameEvent
+from kasparctl.game.records import FaultSource
 from kasparctl.sim.teacher import Teacher
 
 Say = Callable[[str], None]
@@ -28,12 +30,18 @@ class Hands(Protocol):
     """Servos a child can move by hand while they are limp (simulated or emulated)."""
 
     @property
-    def settings(self) -> ServoSettings: ...
+    def settings(self) -> ServoSettings:
+        """The servos' settings: each joint's safe range."""
+        ...
 
     @property
-    def groups(self) -> Mapping[str, tuple[str, ...]]: ...
+    def groups(self) -> Mapping[str, tuple[str, ...]]:
+        """Joint groups by name (the pointing arm is one)."""
+        ...
 
-    def push(self, joint: str, degrees: float) -> None: ...
+    def push(self, joint: str, degrees: float) -> None:
+        """Move a limp joint by hand to `degrees`."""
+        ...
 
 
 class SimulatedGroup:
@@ -53,6 +61,7 @@ class SimulatedGroup:
         narrate: Say | None = None,
         patience: int = MAX_RESUMES,
     ) -> None:
+        """Children who press `keyfob` and move `servos`, believing `answers` (a toy per target)."""
         self.keyfob = keyfob
         self.servos = servos
         self.teacher = teacher
@@ -69,18 +78,19 @@ class SimulatedGroup:
         self._state = "idle"
         self._resuming = False
 
-    def __call__(self, event: str, info: dict[str, Any]) -> None:
-        if event == "state":
+    def __call__(self, event: GameEvent, info: dict[str, Any]) -> None:
+        """Hear a game event and act on it, as the children or the researcher would."""
+        if event is GameEvent.STATE:
             self._state = str(info["state"])
-        if event == "waiting_for_researcher":
+        if event is GameEvent.WAITING_FOR_RESEARCHER:
             self._spawn(self._researcher_next())
-        elif event == "question":
+        elif event is GameEvent.QUESTION:
             self._spawn(self._answer(int(info["target"]), int(info["choice"])))
-        elif event == "prompt" and self._silent_question is not None:
+        elif event is GameEvent.PROMPT and self._silent_question is not None:
             target, choice = self._silent_question
             self._silent_question = None
             self._spawn(self._answer(target, choice, honest_now=True))
-        elif event == "teach":
+        elif event is GameEvent.TEACH:
             self._spawn(self._teach(int(info["bag"])))
         elif _calls_researcher(event, info) and not self._resuming:
             # One researcher at a time: a fault can be announced twice.
@@ -88,6 +98,7 @@ class SimulatedGroup:
             self._spawn(self._researcher_resumes())
 
     async def close(self) -> None:
+        """Stop every press still to come."""
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
@@ -150,7 +161,11 @@ class SimulatedGroup:
         await self._press("green", "another child")
 
 
-def _calls_researcher(event: str, info: dict[str, Any]) -> bool:
+def _calls_researcher(event: GameEvent, info: dict[str, Any]) -> bool:
     """A fault the researcher resumes from (a lost keyfob only once it is back)."""
-    lost_keyfob = event == "fault" and info.get("kind") == "keyfob"
-    return (event == "fault" and not lost_keyfob) or event in ("keyfob_back", "resume_refused")
+    fault = event is GameEvent.FAULT
+    lost_keyfob = fault and info.get("kind") is FaultSource.KEYFOB
+    return (fault and not lost_keyfob) or event in (
+        GameEvent.KEYFOB_BACK,
+        GameEvent.RESUME_REFUSED,
+    )

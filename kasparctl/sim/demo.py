@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -18,6 +19,7 @@ from typing import Any, Generic, Protocol, TextIO, TypeVar
 import msgspec
 import numpy as np
 
+from hal import Hardware
 from hal.clock import LoopClock
 from hal.keyfob.sim import SimKeyfob, TerminalKeyfob
 from hal.servos.api import ServoApi
@@ -25,9 +27,11 @@ from hal.servos.sim import SimServos
 from hal.voice.api import VoiceOutput
 from hal.voice.sim import SimVoice
 from kasparctl.config import Config, SessionPlan, parse_config
-from kasparctl.game.machine import Game, Hardware
+from kasparctl.game.events import GameEvent, Listener
+from kasparctl.game.machine import Game
 from kasparctl.game.phrases import PhrasePicker, load_phrasebook
 from kasparctl.game.session import Session, find_unfinished
+from kasparctl.game.stages import ENDS
 from kasparctl.game.state import GameState, restore
 from kasparctl.sim import simtime
 from kasparctl.sim.children import MAX_RESUMES, Hands, SimulatedGroup
@@ -61,6 +65,8 @@ def demo_config() -> Config:
 
 @dataclass
 class DemoOptions:
+    """Where a demo keeps its records, its seed, its children, and where it prints."""
+
     state_dir: Path
     seed: int = 0
     teacher: Teacher = field(default_factory=Teacher)
@@ -72,6 +78,8 @@ class DemoOptions:
 
 @dataclass
 class DemoResult:
+    """How a demo session ended."""
+
     session: str
     finished: bool
     trials: int
@@ -81,6 +89,7 @@ class DemoResult:
     state_dir: str
 
     def summary(self) -> dict[str, Any]:
+        """The result as plain data (the demo's --json line)."""
         return dataclasses.asdict(self)
 
 
@@ -104,6 +113,7 @@ class DemoRig(Generic[ServosT]):
     state_dir: Path
 
     async def run(self) -> DemoResult:
+        """Start the simulated hardware, play (or resume) the session, close everything."""
         await self.servos.start()
         for group in self.servos.groups:
             # Powered on limp; torque on holds each joint where it is (no jump).
@@ -117,14 +127,14 @@ class DemoRig(Generic[ServosT]):
             await self.keyfob.close()
             await self.voice.close()
             await self.servos.close()
-        data, session = self.game.data, self.game.session
-        assert data is not None and session is not None
+        state, session = self.game.session_state, self.game.session
+        assert state is not None and session is not None
         session.close()
         return DemoResult(
             session=session.id,
             finished=final == "finished",
-            trials=data.trials,
-            learned=sum(p.learned is not None for p in data.progress),
+            trials=state.trials,
+            learned=sum(p.learned is not None for p in state.progress),
             resumed=self.resumed,
             final_state=final,
             state_dir=str(self.state_dir),
@@ -230,15 +240,15 @@ def _answers(config: Config, plan: SessionPlan, seed: int) -> list[int]:
     return list(draw_answer_key(config.game, np.random.default_rng([seed, 3])))
 
 
-def _narrator(narrate: Any) -> Any:
-    def listener(event: str, info: dict[str, Any]) -> None:
-        if event == "point":
+def _narrator(narrate: Callable[[str], None]) -> Listener:
+    def listener(event: GameEvent, info: dict[str, Any]) -> None:
+        if event is GameEvent.POINT:
             narrate(f"Kaspar points at {info['target']}")
-        elif event == "state" and info["state"] in ("paused", "fault", "finished", "stopped"):
+        elif event is GameEvent.STATE and info["state"] in ("paused", "fault", *ENDS):
             narrate(f"the game is {info['state']}")
-        elif event == "session":
+        elif event is GameEvent.SESSION:
             narrate(f"session {info['session']} starts")
-        elif event == "resumed":
+        elif event is GameEvent.RESUMED:
             narrate(f"session resumed in step {info['step']}")
 
     return listener
@@ -267,7 +277,7 @@ def run_demo(
                 return await rig.run()
         except TimeoutError:
             raise DemoStalled(
-                f"no end after {STALL_LIMIT_S:.0f} simulated seconds, in state {rig.game.state}"
+                f"no end after {STALL_LIMIT_S:.0f} simulated seconds, in state {rig.game.stage}"
             ) from None
 
     return simtime.run(bounded(), virtual=True)

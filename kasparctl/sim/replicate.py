@@ -12,8 +12,9 @@ import tempfile
 from pathlib import Path
 
 from kasparctl.config import Config
+from kasparctl.game.records import SessionRecord, TrialRecord, UndoRecord
 from kasparctl.game.session import RECORDS_FILE, read_records
-from kasparctl.learning.session_stats import problems_from_records
+from kasparctl.learning.session_stats import problems_from_trials
 from kasparctl.learning.study_stats import ProblemRecord, StudyStats, summarise
 from kasparctl.sim.demo import DemoOptions, run_demo
 from kasparctl.sim.teacher import Teacher
@@ -36,10 +37,14 @@ def replicate(
             run_demo(config, options, fast=True)
             (session_dir,) = (state_dir / "sessions").iterdir()
             records = read_records(session_dir / RECORDS_FILE).records
-            plan = records[0]["plan"]["plan"]
+            start = records[0]
+            assert isinstance(start, SessionRecord) and isinstance(start.plan, dict)
+            plan = start.plan["plan"]
+            undone = {r.trial for r in records if isinstance(r, UndoRecord)}
+            trials = [r for r in records if isinstance(r, TrialRecord) and r.trial not in undone]
             problems.extend(
-                problems_from_records(
-                    records,
+                problems_from_trials(
+                    trials,
                     config.game.toys,
                     plan["answer_key"],
                     config.profile(plan["profile"]),

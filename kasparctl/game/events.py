@@ -1,0 +1,32 @@
+"""What the game tells its listeners: the daemon's status line, the demo's narrator,
+the simulated children and the tests all follow the game through these events.
+
+A listener is called synchronously with the event and a dict of details; it
+must not block (it runs on the game's own task).
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from typing import Any
+
+
+class GameEvent(enum.StrEnum):
+    """An event a Game emits; the comment says which details come with it."""
+
+    STATE = "state"  # state: the stage the machine entered
+    SESSION = "session"  # session: the id of the session just opened
+    RESUMED = "resumed"  # step: the stage the resumed session carries on in
+    WAITING_FOR_RESEARCHER = "waiting_for_researcher"  # step: idle, placing or revealing
+    TEACH = "teach"  # bag, round: Kaspar asks for bag's pose (from 0)
+    POINT = "point"  # target: the name Kaspar points at
+    QUESTION = "question"  # target, choice (indices), trial: the question is finished
+    PROMPT = "prompt"  # line: the prompt's phrase key (nobody answered)
+    ANSWERED = "answered"  # trial, feedback: the answer is recorded
+    FAULT = "fault"  # kind: the FaultSource that stopped the game
+    KEYFOB_BACK = "keyfob_back"  # (none): the keyfob is read again
+    RESUME_REFUSED = "resume_refused"  # (none): a resume from a fault failed to rearm
+
+
+Listener = Callable[[GameEvent, dict[str, Any]], None]

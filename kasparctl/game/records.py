@@ -1,0 +1,225 @@
+"""What a session records: one typed struct per kind of record, a tagged union on "kind".
+
+Each line of records.jsonl is one of these, as a JSON object whose "kind"
+names its struct. kasparctl.game.session is the one place that encodes and
+decodes them; everything else (the game, GameState.apply, the research
+exports, the statistics, the simulations) reads their typed fields.
+
+Every record carries `seq` (its place in the log, from 1), `time` (UTC, ISO
+8601) and `clock` (the event loop's clock), stamped by the session when it is
+written. A field that only some records of a kind have (a press's `ignored`,
+a fault's `joint`) is UNSET when absent, and then not written at all: a
+record reads back exactly as it was written, which keeps the sessions
+recorded before these structs existed readable and their exports unchanged.
+"""
+
+from __future__ import annotations
+
+import enum
+from typing import Any, Literal
+
+import msgspec
+from msgspec import UNSET, UnsetType
+
+from kasparctl.vocabulary import Command
+
+
+class SessionEvent(enum.StrEnum):
+    """What a "session" record says happened to the session as a whole."""
+
+    START = "start"
+    RESUMED = "resumed"
+    # The daemon stopped mid-session: it is left unfinished, to be resumed at the next start.
+    SHUTDOWN = "shutdown"
+
+
+class HalEvent(enum.StrEnum):
+    """What a "hal" record reports of the hardware."""
+
+    KEYFOB_LOST = "keyfob_lost"
+    KEYFOB_BACK = "keyfob_back"
+    # A line that was not heard to its end (timed out or failed).
+    VOICE = "voice"
+
+
+class FaultSource(enum.StrEnum):
+    """Which part failed: what a "fault" record's `fault` names, and what Kaspar says about it."""
+
+    SERVO = "servo"
+    KEYFOB = "keyfob"
+    VOICE = "voice"
+    # A step that raised an error no hardware explains: a bug, recorded and stopped like a fault.
+    SOFTWARE = "software"
+
+
+class Confirmation(enum.StrEnum):
+    """What a researcher's command did; Kaspar confirms it with the phrase confirm.<value>."""
+
+    START = "start"
+    NEXT_STEP = "next_step"
+    PAUSE = "pause"
+    RESUME = "resume"
+    UNDO = "undo"
+    STOP = "stop"
+
+
+Button = Literal["green", "red"]
+
+
+class Record(msgspec.Struct, tag_field="kind", frozen=True):
+    """Fields every record has; the session stamps them when it writes the record."""
+
+    seq: int = 0
+    time: str = ""
+    clock: float = 0.0
+
+
+class SessionRecord(Record, tag="session", kw_only=True, frozen=True):
+    """The session started (with its plan), was resumed, or was left at a shutdown."""
+
+    event: SessionEvent
+    # start: plan.json as written (session, created, group, condition, variant, seed, plan).
+    plan: dict[str, Any] | UnsetType = UNSET
+    # resumed: the machine's state it resumed in, and the trials recorded before.
+    step: str | UnsetType = UNSET
+    trials: int | UnsetType = UNSET
+    # shutdown: why the daemon stopped, and the machine's state then.
+    reason: str | UnsetType = UNSET
+    state: str | UnsetType = UNSET
+
+
+class CommandRecord(Record, tag="command", kw_only=True, frozen=True):
+    """A researcher's command: applied (with its confirmation) or ignored (with why)."""
+
+    command: Command
+    gesture: str
+    at: float
+    # The machine's state when the command came.
+    state: str
+    applied: bool
+    confirm: Confirmation | UnsetType = UNSET
+    ignored: str | UnsetType = UNSET
+
+
+class PressRecord(Record, tag="press", kw_only=True, frozen=True):
+    """A key press that was not an answer: too early, extra, a retry while teaching, or unused."""
+
+    button: str
+    at: float
+    # The gesture's name, when a researcher gesture had no command.
+    gesture: str | UnsetType = UNSET
+    ignored: str | UnsetType = UNSET
+    # A second press right after an answer, and the trial it followed.
+    extra: bool | UnsetType = UNSET
+    trial: int | UnsetType = UNSET
+    # While teaching: the bag whose pose was asked again, and joints outside their range.
+    teach_retry: int | UnsetType = UNSET
+    outside: list[str] | UnsetType = UNSET
+
+
+class PromptRecord(Record, tag="prompt", kw_only=True, frozen=True):
+    """Nobody answered for `waited` seconds, so Kaspar said the prompt `line` (a phrase key)."""
+
+    line: str
+    waited: float
+
+
+class FaultRecord(Record, tag="fault", kw_only=True, frozen=True):
+    """A part failed, in the machine's `state`; `joint` for a servo, null for other parts."""
+
+    fault: FaultSource
+    detail: str
+    state: str
+    # Written by a fault the game stopped for (null unless a servo joint); absent for a
+    # failure while resting or rearming, which is recorded but stops nothing.
+    joint: str | UnsetType | None = UNSET
+
+
+class HalRecord(Record, tag="hal", kw_only=True, frozen=True):
+    """The keyfob lost or back, or a line of speech not heard to its end."""
+
+    event: HalEvent
+    reason: str | UnsetType = UNSET  # keyfob_lost
+    device: str | UnsetType = UNSET  # keyfob_back
+    status: str | UnsetType = UNSET  # voice: the SpokenStatus value
+    text: str | UnsetType = UNSET  # voice
+    error: str | UnsetType | None = UNSET  # voice
+
+
+class PoseRecord(Record, tag="pose", kw_only=True, frozen=True):
+    """A child showed Kaspar where bag `bag` is, in teaching round `round`: joint -> degrees."""
+
+    bag: int
+    round: int
+    pose: dict[str, float]
+    at: float
+
+
+class StepRecord(Record, tag="step", kw_only=True, frozen=True):
+    """The game entered `to`: one of the steps, "finished" or "stopped"."""
+
+    to: str
+
+
+class UndoRecord(Record, tag="undo", kw_only=True, frozen=True):
+    """The researcher took back the answer to trial `trial` (the last one)."""
+
+    trial: int
+
+
+class TrialRecord(Record, tag="trial", kw_only=True, frozen=True):
+    """One guess: the question Kaspar asked, the answer, and what the learner made of it.
+
+    docs/research-data.md documents every field (as the trials CSV's columns).
+    """
+
+    trial: int
+    problem_trial: int
+    step: str
+    target: str
+    target_index: int
+    child: str
+    child_index: int
+    candidates: list[str]
+    probabilities: list[float]
+    entropy: float
+    band: str | None
+    spoken: list[str]
+    choice: str
+    choice_index: int
+    feedback: Button
+    question_end: float
+    feedback_at: float
+    reaction_time: float
+    reward: float
+    q_before: list[float]
+    q_after: list[float]
+    # The learner's generator after this guess's draw (numpy's bit_generator.state).
+    learner_rng: dict[str, Any]
+    perseverative: bool
+    win_shift: bool
+    correct: bool | None
+    feedback_right: bool | None
+    learned: bool
+
+    @property
+    def green(self) -> bool:
+        """Whether the children said yes."""
+        return self.feedback == "green"
+
+
+AnyRecord = (
+    SessionRecord
+    | CommandRecord
+    | PressRecord
+    | PromptRecord
+    | FaultRecord
+    | HalRecord
+    | PoseRecord
+    | StepRecord
+    | UndoRecord
+    | TrialRecord
+)
+
+# Records that change GameState when applied; every other kind is history only.
+STATE_CHANGING = (StepRecord, PoseRecord, TrialRecord, UndoRecord, CommandRecord)

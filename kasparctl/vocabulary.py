@@ -1,0 +1,27 @@
+"""Words the configuration and the game share: the researcher's commands, the group limit.
+
+A leaf module (it imports nothing of the project), so kasparctl.config can
+validate against the very enum the game acts on without importing the game.
+"""
+
+from __future__ import annotations
+
+import enum
+
+
+class Command(enum.StrEnum):
+    """What the researcher can tell the game with a keyfob gesture (game.commands)."""
+
+    NEXT = "next"
+    PAUSE = "pause"
+    UNDO = "undo"
+    STOP = "stop"
+
+
+# Commands a session cannot be run without: every configuration must map a gesture to each.
+REQUIRED_COMMANDS = (Command.NEXT, Command.PAUSE, Command.STOP)
+
+# What Kaspar calls each child of a group whose plan gives no first names; a group
+# has at most as many children as there are words here.
+CHILD_WORDS = ("child one", "child two", "child three", "child four", "child five", "child six")
+MAX_CHILDREN = len(CHILD_WORDS)
