@@ -173,10 +173,10 @@ def in_ci() -> bool:
 
 @contextlib.contextmanager
 def torn_down_on_sigterm() -> Iterator[None]:
-    """A SIGTERM (a CI timeout) unwinds like ^C, so the container is still torn down."""
+    """A SIGTERM (a CI timeout) unwinds as ^C does: the container is torn down, pytest stops."""
 
     def unwind(signum: int, frame: object) -> None:
-        raise SystemExit(128 + signum)
+        raise KeyboardInterrupt(f"signal {signum}")
 
     previous = signal.signal(signal.SIGTERM, unwind)
     try:
@@ -291,6 +291,7 @@ def report(request: pytest.FixtureRequest, robot: Robot) -> None:
         print(line, file=sys.stderr)
         return
     with capture.global_and_fixture_disabled():
+        reporter.write("\n")  # after the progress dots
         reporter.write_line(line)
 
 
@@ -388,6 +389,8 @@ def test_a_device_outside_device_allow_is_refused(robot: Robot) -> None:
     p = robot.show("DevicePolicy", "DeviceAllow")
     assert p["DevicePolicy"] == "closed"
     assert "char-ttyUSB rw" in p["DeviceAllow"]
+    code, output = robot.probe(["id", "-un"])
+    assert (code, output.strip()) == (0, "kaspar")  # the probe is sandboxed as the service is
     # /dev/net/tun is in the container (nspawn makes it) but not in DeviceAllow=.
     code, output = robot.probe(["sh", "-c", OPEN_DEVICES])
     assert code == 0, output
@@ -402,7 +405,7 @@ def spoken_seconds(data: bytes) -> float:
     with wave.open(io.BytesIO(data)) as wav:
         assert wav.getsampwidth() == 2
         frames = wav.readframes(wav.getnframes())
-        seconds = wav.getnframes() / wav.getframerate()
+        seconds: float = wav.getnframes() / wav.getframerate()
     samples = array("h", frames)
     assert max(abs(sample) for sample in samples) > 1000, "silence"
     return seconds
