@@ -528,3 +528,15 @@ def test_uninstall_removes_the_service_and_keeps_records_and_configuration(robot
     assert robot.show("LoadState")["LoadState"] == "not-found"
     assert robot.machine.run(["find", STATE_DIR, "-printf", "%P %s\n"]).stdout == records_before
     assert robot.machine.read_bytes(CONFIG).decode().endswith(RESEARCHER_EDIT)
+
+
+def test_installing_again_resumes_the_kept_session(robot: Robot) -> None:
+    sessions = session_dirs(robot)
+    robot.machine.run(["bash", "systemd/install.sh"], cwd=CHECKOUT, env=OFFLINE_PIP, timeout=1200)
+    robot.wait_for_status(PLACING)  # the unfinished session, resumed
+    assert "resuming session" in robot.log_events(
+        invocation=robot.show("InvocationID")["InvocationID"]
+    )
+    assert session_dirs(robot) == sessions
+    owners = robot.machine.run(["find", STATE_DIR, "-printf", "%u %g\n"]).stdout.split("\n")
+    assert set(filter(None, owners)) == {"kaspar kaspar"}  # handed to the new user
