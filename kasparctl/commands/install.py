@@ -1,61 +1,49 @@
-"""`kasparctl install --print`: the exact commands that install the service on a fresh robot.
+"""`kasparctl install --print`: how to install the service on a robot, with systemd/install.sh.
 
-It prints rather than runs them: installing a service that drives a robot is
-for a person to read and do, one step at a time.
+The script is the one source of truth for the steps (packages, /opt/kasparctl,
+the kaspar user, kernel modules, udev rules, the configuration, the unit); this
+command only says how to run it, and its --dry-run prints every step without
+doing any. It prints rather than runs: installing a service that drives a robot
+is for a person to decide, as root.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
-PREFIX = "/opt/kasparctl"
+# Where the script is when kasparctl runs from a checkout (an editable install);
+# a wheel does not carry it, so otherwise the path is given relative to a checkout.
+CHECKOUT_SCRIPT = Path(__file__).resolve().parents[2] / "systemd" / "install.sh"
 
-STEPS = (
-    (
-        "Debian packages: speech, playback, and a compiler for python-evdev",
-        "sudo apt-get install -y python3-venv python3-dev gcc espeak-ng alsa-utils",
-    ),
-    (
-        "kasparctl in its own virtual environment (run from this checkout)",
-        f"sudo python3 -m venv {PREFIX} && sudo {PREFIX}/bin/pip install .",
-    ),
-    (
-        "the service's user, in the dialout, input and audio groups",
-        "sudo install -m 0644 systemd/kasparctl-sysusers.conf /etc/sysusers.d/kasparctl.conf"
-        " && sudo systemd-sysusers",
-    ),
-    (
-        "the serial adapters' kernel modules at boot (DeviceAllow= needs their groups)",
-        "sudo install -m 0644 systemd/kasparctl-modules.conf /etc/modules-load.d/kasparctl.conf",
-    ),
-    (
-        "stable device names for the servo buses and the keyfob (edit the ids first)",
-        "sudo install -m 0644 systemd/99-kaspar-serial.rules systemd/99-kaspar-keyfob.rules"
-        " /etc/udev/rules.d/ && sudo udevadm control --reload && sudo udevadm trigger",
-    ),
-    (
-        "the configuration (start from the robot's: kaspar-1c.toml or kaspar-3.toml)",
-        "sudo install -d -m 0755 /etc/kaspar && sudo install -m 0644 systemd/kaspar.toml"
-        " /etc/kaspar/kaspar.toml",
-    ),
-    (
-        "check it: configuration, servos, keyfob and voice",
-        f"sudo -u kaspar {PREFIX}/bin/kasparctl check --config /etc/kaspar/kaspar.toml",
-    ),
-    (
-        "the service, started now and at every boot",
-        "sudo install -m 0644 systemd/kasparctl.service /etc/systemd/system/"
-        " && sudo systemctl daemon-reload && sudo systemctl enable --now kasparctl.service",
-    ),
-    ("follow it", "journalctl -u kasparctl -f"),
-)
+
+def script_path() -> str:
+    """The install script: its absolute path in this checkout, else its place in any checkout."""
+    return str(CHECKOUT_SCRIPT) if CHECKOUT_SCRIPT.is_file() else "systemd/install.sh"
+
+
+def instructions(script: str) -> str:
+    """The text printed: how to run the script, its dry run first."""
+    return (
+        "# Install kasparctl as a service on Debian 12 or Raspberry Pi OS (bookworm).\n"
+        "# One script does every step: Debian packages, a venv in /opt/kasparctl, the kaspar\n"
+        "# user, the serial adapters' kernel modules, udev rules, /etc/kaspar/kaspar.toml\n"
+        "# (never overwritten) and the unit, enabled and started. Run it as root (su -, or\n"
+        "# sudo) from a checkout of kasparctl; it is safe to run again.\n"
+        f"bash {script} --dry-run     # prints each step, changes nothing\n"
+        f"bash {script}\n"
+        "# Removing it keeps the research records (/var/lib/kaspar) and the configuration:\n"
+        f"bash {script} --uninstall\n"
+    )
 
 
 def register(subparsers: Any) -> None:
-    """Add `install --print` to the command line."""
-    parser = subparsers.add_parser("install", help="print the commands that install the service")
+    """Add the `install` subcommand."""
+    parser = subparsers.add_parser(
+        "install", help="print how to install the service (systemd/install.sh)"
+    )
     parser.add_argument(
         "--print",
         action="store_true",
@@ -67,10 +55,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(arguments: argparse.Namespace) -> int:
-    """Print the numbered install steps; nothing is run."""
+    """Print the instructions; exit 0."""
     del arguments
-    out = sys.stdout
-    out.write("# Install kasparctl on a fresh robot. Run from a checkout of kasparctl.\n")
-    for number, (why, command) in enumerate(STEPS, start=1):
-        out.write(f"\n# {number}. {why}\n{command}\n")
+    sys.stdout.write(instructions(script_path()))
     return 0
