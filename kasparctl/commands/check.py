@@ -26,12 +26,14 @@ TEST_LINE = "Hello, I am Kaspar. My voice is working."
 
 @dataclass(frozen=True, slots=True)
 class Result:
+    """One row of the check table: what was checked, whether it is ok, and the detail."""
     part: str
     ok: bool
     detail: str
 
 
 def register(subparsers: Any) -> None:
+    """Add the `check` subcommand."""
     parser = subparsers.add_parser("check", help="check the configuration and the hardware")
     parser.add_argument(
         "--config",
@@ -45,6 +47,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(arguments: argparse.Namespace) -> int:
+    """Check the configuration, phrases, servos, keyfob and voice; exit 1 if any fails."""
     path = arguments.config or default_config_path()
     try:
         config = load_config(path)

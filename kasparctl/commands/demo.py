@@ -25,6 +25,7 @@ from kasparctl.sim.teacher import Teacher, TeacherError
 
 
 def register(subparsers: Any) -> None:
+    """Add the `demo` subcommand."""
     parser = subparsers.add_parser(
         "demo", help="watch a simulated group of children teach Kaspar", description=__doc__
     )
@@ -50,6 +51,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(arguments: argparse.Namespace) -> int:
+    """Play the whole game on the simulated robot with simulated children."""
     if arguments.interactive and arguments.fast:
         # Simulated time would rush through every prompt before a person could type.
         print("error: --interactive: needs real or --speed time, not --fast", file=sys.stderr)

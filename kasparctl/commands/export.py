@@ -17,6 +17,7 @@ from kasparctl.research.tidy import write_events, write_trials
 
 
 def register(subparsers: Any) -> None:
+    """Add the `export` subcommand."""
     parser = subparsers.add_parser(
         "export", help="export trials to CSV for R or pandas", description=__doc__
     )
@@ -32,6 +33,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(arguments: argparse.Namespace) -> int:
+    """Write the trials (and optionally the events) of every session as CSV."""
     try:
         _, sessions = read_sessions(arguments)
     except SourceError as error:

@@ -21,6 +21,7 @@ from kasparctl.research.summary import build_summary, markdown, write_json
 
 
 def register(subparsers: Any) -> None:
+    """Add the `report` subcommand."""
     parser = subparsers.add_parser(
         "report", help="figures and a summary like the paper's", description=__doc__
     )
@@ -30,6 +31,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(arguments: argparse.Namespace) -> int:
+    """Draw the paper's figures and write the summary for every session."""
     try:
         # Before reading a thousand sessions, not after.
         require_matplotlib()

@@ -20,6 +20,7 @@ from kasparctl.log import configure_logging
 
 
 def register(subparsers: Any) -> None:
+    """Add the `say` subcommand."""
     parser = subparsers.add_parser("say", help="speak a line (or write it to a WAV file)")
     parser.add_argument("text", metavar="TEXT", help="what Kaspar says")
     parser.add_argument("--wav", metavar="FILE", help="write a WAV file instead of playing it")
@@ -34,6 +35,7 @@ def register(subparsers: Any) -> None:
 
 
 def voice_settings(arguments: argparse.Namespace) -> VoiceSettings:
+    """The voice settings of the configuration, with the command line's overrides."""
     path = arguments.config or os.environ.get("KASPAR_CONFIG")
     if path is None and DEFAULT_CONFIG_PATH.exists():
         path = str(DEFAULT_CONFIG_PATH)
@@ -44,6 +46,7 @@ def voice_settings(arguments: argparse.Namespace) -> VoiceSettings:
 
 
 async def speak(settings: VoiceSettings, text: str, key: str | None, wav: str | None) -> Spoken:
+    """Say `text` once (or render it into `wav`) and return how it went."""
     sink = WavSink(file=Path(wav)) if wav else None
     voice = Voice(settings, sink=sink)
     try:
@@ -53,6 +56,7 @@ async def speak(settings: VoiceSettings, text: str, key: str | None, wav: str | 
 
 
 def run(arguments: argparse.Namespace) -> int:
+    """Say a line with the configured voice; exit 1 if it could not be said."""
     # Warnings (an engine falling back) go to stderr; stdout stays for results.
     configure_logging("warning", "console", stream=sys.stderr)
     try:

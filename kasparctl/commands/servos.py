@@ -22,6 +22,7 @@ DEFAULT_IDS = {"dynamixel1": "1-30", "dynamixel2": "1-30", "herkulex": "0-30", "
 
 
 def register(subparsers: Any) -> None:
+    """Add the `servos` subcommand with its `scan` and `read` actions."""
     parser = subparsers.add_parser("servos", help="scan a servo bus or read the configured joints")
     commands = parser.add_subparsers(dest="servos_command", metavar="ACTION", required=True)
 
@@ -55,6 +56,7 @@ def register(subparsers: Any) -> None:
 
 
 def parse_ids(text: str) -> list[int]:
+    """Servo ids from '1-5,9' (ranges and single ids, comma-separated)."""
     ids: list[int] = []
     try:
         for part in text.split(","):
@@ -68,7 +70,10 @@ def parse_ids(text: str) -> list[int]:
     return sorted(set(ids))
 
 
-async def scan(port: str, protocol: str, baud: int, ids: list[int], margin: float) -> list[dict]:
+async def scan(
+    port: str, protocol: str, baud: int, ids: list[int], margin: float
+) -> list[dict[str, Any]]:
+    """Ping every id on one port; one row (id, model number, model) per servo that answers."""
     # No retries: a missing id costs one timeout, and most ids are missing.
     bus = SerialBus("scan", port, baud, timeout_margin=margin, retries=0)
     driver = DRIVERS[protocol](bus)
@@ -99,6 +104,7 @@ def _quiet_logging() -> None:
 
 
 def run_scan(arguments: argparse.Namespace) -> int:
+    """Print the servos answering on a port; exit 1 if the port cannot be opened."""
     _quiet_logging()
     ids = arguments.ids or parse_ids(DEFAULT_IDS[arguments.protocol])
     try:
@@ -118,7 +124,8 @@ def run_scan(arguments: argparse.Namespace) -> int:
     return 0 if found else 1
 
 
-async def read_joints(config_path: str) -> list[dict]:
+async def read_joints(config_path: str) -> list[dict[str, Any]]:
+    """Every configured joint's position, torque, temperature, voltage and fault."""
     config = load_config(config_path)
     settings, clock = config.servos, MonotonicClock()
     joints = (
@@ -147,6 +154,7 @@ async def read_joints(config_path: str) -> list[dict]:
 
 
 def run_read(arguments: argparse.Namespace) -> int:
+    """Print every configured joint as it is now; exit 1 if any is faulty."""
     _quiet_logging()
     try:
         rows = asyncio.run(read_joints(arguments.config))

@@ -19,6 +19,7 @@ COLUMNS = ("session", "group", "condition", "variant", "date", "trials", "status
 
 
 def register(subparsers: Any) -> None:
+    """Add the `sessions` subcommand."""
     parser = subparsers.add_parser(
         "sessions", help="list the recorded sessions", description=__doc__
     )
@@ -28,6 +29,7 @@ def register(subparsers: Any) -> None:
 
 
 def describe(session: SessionData) -> dict[str, Any]:
+    """One session as a row of the listing."""
     return {
         **session.identity,
         "created": session.created,
@@ -42,6 +44,7 @@ def describe(session: SessionData) -> dict[str, Any]:
 
 
 def run(arguments: argparse.Namespace) -> int:
+    """List every session of a state directory: group, condition, date, trials, status."""
     try:
         source, sessions = read_sessions(arguments)
     except SourceError as error:

@@ -11,7 +11,9 @@ import socket
 
 
 class Notifier:
+    """Tells systemd how the service is (READY, STATUS, WATCHDOG, STOPPING); silent outside it."""
     def __init__(self, address: str | None = None) -> None:
+        """Talk to `address`, or to $NOTIFY_SOCKET when None."""
         address = os.environ.get("NOTIFY_SOCKET") if address is None else address
         self._address: str | None = None
         self._socket: socket.socket | None = None
@@ -22,6 +24,7 @@ class Notifier:
 
     @property
     def enabled(self) -> bool:
+        """Whether there is a systemd to tell."""
         return self._socket is not None
 
     def notify(self, *fields: str) -> bool:
@@ -35,18 +38,23 @@ class Notifier:
         return True
 
     def ready(self, status: str) -> bool:
+        """The service is up: READY=1 with the status in words."""
         return self.notify("READY=1", f"STATUS={status}")
 
     def status(self, status: str) -> bool:
+        """The status in words, as `systemctl status` shows it."""
         return self.notify(f"STATUS={status}")
 
     def watchdog(self) -> bool:
+        """A watchdog ping: the service is alive."""
         return self.notify("WATCHDOG=1")
 
     def stopping(self, status: str) -> bool:
+        """The service is stopping, with why."""
         return self.notify("STOPPING=1", f"STATUS={status}")
 
     def close(self) -> None:
+        """Close the socket; later calls do nothing."""
         if self._socket is not None:
             self._socket.close()
             self._socket = None
