@@ -22,6 +22,7 @@ class FaultKind(enum.Enum):
     VOLTAGE = "voltage"  # input voltage outside the servo's limits
     HARDWARE = "hardware"  # encoder, driver or memory fault reported by the servo
     BUS_LOST = "bus_lost"  # the serial adapter vanished
+    IMPOSSIBLE = "impossible_reading"  # a position the servo cannot report: never trusted
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,7 +41,13 @@ class Fault:
 
 @dataclass(frozen=True, slots=True)
 class JointStatus:
-    """One joint as `kasparctl servos read` and the health poll see it."""
+    """One joint as `kasparctl servos read` and the health poll see it.
+
+    `flags` are the error bits the servo reported (latched ones included, even
+    those cleared since); `problems` name what is impossible or unsafe in the
+    reading itself (a position the servo cannot report, a temperature no servo
+    reaches). A joint is healthy only with no fault, no flags and no problems.
+    """
 
     joint: str
     position_deg: float | None
@@ -49,6 +56,14 @@ class JointStatus:
     voltage_v: float | None = None
     load: float | None = None  # fraction of maximum torque, signed by direction
     fault: Fault | None = None
+    raw_position: int | None = None
+    flags: tuple[str, ...] = ()
+    problems: tuple[str, ...] = ()
+
+    @property
+    def healthy(self) -> bool:
+        """No fault, no error bit, nothing impossible."""
+        return self.fault is None and not self.flags and not self.problems
 
 
 Pose = Mapping[str, float]  # joint name -> degrees
@@ -147,7 +162,13 @@ class ServoApi(Protocol):
 
 @dataclass(frozen=True, slots=True)
 class Health:
-    """One servo's condition as its driver reads it; `kind` is set when it is a fault."""
+    """One servo's condition as its driver reads it; `kind` is set when it is a fault.
+
+    `flags` names every error bit the servo reported, `cleared` those the driver
+    wrote back to zero at once because they are about one packet or a limit, not
+    the servo's health (HerkuleX invalid packet, position limit). `temperature_limit_c`
+    is the servo's own cut-off where the protocol has one.
+    """
 
     position: int | None = None
     temperature_c: float | None = None
@@ -155,6 +176,8 @@ class Health:
     load: float | None = None
     flags: tuple[str, ...] = ()  # the protocol's error bits, by name
     kind: FaultKind | None = None
+    cleared: tuple[str, ...] = ()
+    temperature_limit_c: float | None = None
 
 
 class ServoDriver(Protocol):

@@ -287,87 +287,166 @@ class Dynamixel2Driver(BusDriver):
 
 
 class HerkulexDriver(BusDriver):
-    """HerkuleX DRS-0101 servos with the factory ACK policy (only reads are answered)."""
+    """HerkuleX DRS-0101/0201 servos, whatever ACK policy a previous program left them at.
+
+    At start, and again after the adapter reconnects or a servo stops answering
+    a read, every servo is told to answer reads only (RAM 1, ACK policy 1) by one
+    broadcast write, which no servo answers whatever its policy. Pings are STAT,
+    which every policy answers. Positions keep their 10 position bits: real
+    servos set flags in the high byte. Error bits that are about a packet or a
+    position limit are written back to zero at once (reported as `cleared`);
+    fault bits stay latched until reset_errors().
+    """
 
     framing = Framing(hx.HEAD_SIZE, hx.packet_length)
+
+    def __init__(self, bus: SerialBus) -> None:
+        """Drive the HerkuleX servos on `bus`; nothing is sent before start()."""
+        super().__init__(bus)
+        self._configured_at: int | None = None  # bus reconnects when the policy was last sent
+        self._temperature_limits: dict[int, float] = {}
+
+    async def start(self) -> None:
+        """Start the bus and set every servo's ACK policy (if the port is there yet)."""
+        await super().start()
+        await self._configure()
+
+    async def _configure(self) -> None:
+        """Broadcast ACK policy 1 once per connection of the port: a reconnect may follow a
+        power cycle, after which each servo has its EEP policy back."""
+        reconnects = self.bus.stats.reconnects
+        if self._configured_at == reconnects or not self.bus.connected:
+            return
+        await self._send_ack_policy()
+        self._configured_at = reconnects
+
+    async def _send_ack_policy(self) -> None:
+        # RAM register 1. (The published Kaspar driver wrote it to 0x34, the torque register.)
+        policy = bytes((hx.AckPolicy.READS_ONLY,))
+        await self.bus.transact(hx.ram_write(hx.BROADCAST_ID, hx.Ram.ACK_POLICY, policy))
 
     def _ack(self, servo_id: int, command: hx.Command) -> Callable[[list[bytes]], hx.Ack]:
         def decode(packets: list[bytes]) -> hx.Ack:
             reply = hx.decode_ack(packets[0])
             if reply.servo_id != servo_id or reply.command is not command:
-                raise hx.HerkulexError(f"reply from id {reply.servo_id}, expected {servo_id}")
+                raise hx.HerkulexError(
+                    f"reply {reply.command.name} from id {reply.servo_id}, "
+                    f"expected {command.name} from {servo_id}"
+                )
             return reply
 
         return decode
 
-    async def _ram_read(self, servo_id: int, address: int, length: int) -> hx.Ack:
-        request = hx.ram_read(servo_id, address, length)
-        reply = await self._ask(
-            servo_id, request, self._ack(servo_id, hx.Command.RAM_READ), 11 + length
-        )
-        read_address, value = reply.read_value()
-        if read_address != address or len(value) != length:
-            raise ServoSilent(servo_id, f"servo {servo_id}: read reply for the wrong register")
-        return reply
+    def _value(
+        self, servo_id: int, command: hx.Command, address: int, length: int
+    ) -> Callable[[list[bytes]], hx.Ack]:
+        check = self._ack(servo_id, command)
+
+        def decode(packets: list[bytes]) -> hx.Ack:
+            reply = check(packets)
+            read_address, value = reply.read_value()
+            if read_address != address or len(value) != length:
+                raise hx.HerkulexError(f"servo {servo_id}: reply for the wrong register")
+            return reply
+
+        return decode
+
+    async def _read(
+        self, servo_id: int, address: int, length: int, eep: bool = False
+    ) -> hx.Ack:
+        """One RAM_READ (or EEP_READ); a silent servo gets the ACK policy again and one more try.
+
+        A servo left at policy 0 answers no read at all: without this it would
+        look missing although it is there (it still answers STAT).
+        """
+        command = hx.Command.EEP_READ if eep else hx.Command.RAM_READ
+        build = hx.eep_read if eep else hx.ram_read
+        decode = self._value(servo_id, command, address, length)
+        await self._configure()
+        try:
+            return await self._ask(servo_id, build(servo_id, address, length), decode, 11 + length)
+        except ServoSilent:
+            await self._send_ack_policy()
+            return await self._ask(servo_id, build(servo_id, address, length), decode, 11 + length)
 
     async def ping(self, servo_id: int) -> int | None:
-        """EEP_READ of the model number; None when unanswered."""
+        """STAT (answered at every ACK policy), then the model number; None when silent.
+
+        0 for a servo that answers STAT but not the model read.
+        """
+        await self._configure()
         try:
-            request = hx.eep_read(servo_id, hx.Eep.MODEL_NO_1, 2)
-            reply = await self._ask(servo_id, request, self._ack(servo_id, hx.Command.EEP_READ), 13)
+            await self._ask(servo_id, hx.stat(servo_id), self._ack(servo_id, hx.Command.STAT), 9)
         except ServoSilent:
             return None
-        _, value = reply.read_value()
-        return value[0] << 8 | value[1] if len(value) == 2 else None
+        try:
+            reply = await self._read(servo_id, hx.Eep.MODEL_NO_1, 2, eep=True)
+        except ServoSilent:
+            return 0
+        return hx.model_number(reply.read_value()[1])
 
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
         """One RAM_READ of the calibrated position per servo, all in one hand-off."""
-        # HerkuleX has no group read: one RAM_READ per servo, handed over at once.
+        await self._configure()
         address = hx.Ram.CALIBRATED_POSITION
         exchanges = [
             Exchange(hx.ram_read(i, address, 2), 1, self.framing,
                      self._value(i, hx.Command.RAM_READ, address, 2), 13)
             for i in ids
         ]
-        outcomes = await self._each(ids, exchanges)
-        return {i: hx.u16(value) & 0x7FFF for i, value in zip(ids, outcomes, strict=True)}
-
-    def _value(
-        self, servo_id: int, command: hx.Command, address: int, length: int
-    ) -> Callable[[list[bytes]], bytes]:
-        check = self._ack(servo_id, command)
-
-        def decode(packets: list[bytes]) -> bytes:
-            read_address, value = check(packets).read_value()
-            if read_address != address or len(value) != length:
-                raise hx.HerkulexError(f"servo {servo_id}: reply for the wrong register")
-            return value
-
-        return decode
+        try:
+            outcomes = await self._each(ids, exchanges)
+        except ServoSilent:
+            # Perhaps left at ACK policy 0 (or power-cycled): tell every servo again, once.
+            await self._send_ack_policy()
+            outcomes = await self._each(ids, exchanges)
+        return {
+            i: hx.position(reply.read_value()[1])
+            for i, reply in zip(ids, outcomes, strict=True)
+        }
 
     async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
         """One S_JOG with the play time of one control step (1 to 255 units of 11.2 ms)."""
-        playtime = min(255, max(1, round(step / hx.PLAYTIME_SECONDS)))
+        await self._configure()
+        playtime = min(hx.MAX_PLAYTIME, max(1, round(step / hx.PLAYTIME_SECONDS)))
         moves = [(servo_id, raw, 0) for servo_id, (raw, _speed) in goals.items()]
         await self.bus.transact(hx.s_jog(playtime, moves))
 
     async def set_torque(self, ids: Sequence[int], on: bool) -> None:
-        """RAM_WRITE of TORQUE_CONTROL per servo in one write; unanswered, as writes are."""
+        """RAM_WRITE of TORQUE_CONTROL per servo in one write; unanswered at ACK policy 1."""
+        await self._configure()
         value = bytes((hx.TorqueControl.ON if on else hx.TorqueControl.FREE,))
-        # With the factory ACK policy (reads only) writes are not answered: one write for all.
         request = b"".join(hx.ram_write(i, hx.Ram.TORQUE_CONTROL, value) for i in ids)
         await self.bus.transact(request)
 
     async def reset_errors(self, ids: Sequence[int]) -> None:
-        """RAM_WRITE of zero to STATUS_ERROR: a HerkuleX latches it until then."""
-        # A HerkuleX latches its status error until it is written back to zero.
+        """RAM_WRITE of zero to STATUS_ERROR and STATUS_DETAIL: a HerkuleX latches them."""
+        await self._configure()
         zero = bytes((0, 0))
         await self.bus.transact(b"".join(hx.ram_write(i, hx.Ram.STATUS_ERROR, zero) for i in ids))
 
     async def read_health(self, servo_id: int) -> Health:
-        """RAM_READ of the voltage; fault from the reply's status error byte."""
-        reply = await self._ram_read(servo_id, hx.Ram.VOLTAGE, 1)
+        """One RAM_READ from the status error to the position; transient bits cleared at once.
+
+        Temperature is converted with hx.TEMPERATURE_TABLE; the servo's own
+        temperature limit (RAM 5) is read once per servo.
+        """
+        first = hx.Ram.STATUS_ERROR
+        length = hx.Ram.CALIBRATED_POSITION + 2 - first
+        reply = await self._read(servo_id, first, length)
+        registers = reply.read_value()[1]
         error = reply.status_error
+        flags = _flags(error, hx.StatusError)
+        if error & hx.StatusError.INVALID_PACKET:
+            why = reply.status_detail & ~(
+                hx.StatusDetail.MOVING | hx.StatusDetail.INPOSITION | hx.StatusDetail.MOTOR_ON
+            )
+            flags += _flags(why, hx.StatusDetail)
+        cleared: tuple[str, ...] = ()
+        if error and not error & ~hx.TRANSIENT_ERRORS:
+            # Only packet and limit bits: safe to clear (torque policy 0x35 does not act on them).
+            await self.reset_errors([servo_id])
+            cleared = _flags(error, hx.StatusError)
         kind = None
         if error & hx.StatusError.EXCEED_TEMPERATURE:
             kind = FaultKind.OVERHEATING
@@ -378,10 +457,22 @@ class HerkulexDriver(BusDriver):
         elif error & (hx.StatusError.DRIVER_FAULT | hx.StatusError.EEP_DISTORTED):
             kind = FaultKind.HARDWARE
         return Health(
-            voltage_v=reply.read_value()[1][0] * 0.074,
-            flags=_flags(error, hx.StatusError),
+            position=hx.position(registers[-2:]),
+            temperature_c=hx.temperature_c(registers[hx.Ram.TEMPERATURE - first]),
+            voltage_v=hx.voltage_v(registers[hx.Ram.VOLTAGE - first]),
+            flags=flags,
             kind=kind,
+            cleared=cleared,
+            temperature_limit_c=await self._temperature_limit(servo_id),
         )
+
+    async def _temperature_limit(self, servo_id: int) -> float:
+        limit = self._temperature_limits.get(servo_id)
+        if limit is None:
+            reply = await self._read(servo_id, hx.Ram.MAX_TEMPERATURE, 1)
+            limit = hx.temperature_c(reply.read_value()[1][0])
+            self._temperature_limits[servo_id] = limit
+        return limit
 
 
 class MaestroDriver(BusDriver):

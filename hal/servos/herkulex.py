@@ -1,14 +1,24 @@
-"""HerkuleX (DRS-0101/0201) packets: pure functions, no I/O.
+"""HerkuleX (DRS-0101/0201) packets and register values: pure functions, no I/O.
 
 Packet: FF FF SIZE ID CMD CS1 CS2 DATA..., SIZE counts every byte,
 CS1 = (SIZE ^ ID ^ CMD ^ each DATA byte) & 0xFE, CS2 = ~CS1 & 0xFE
 (HerkuleX manual v1.1, section 4-1). A reply (ACK) has CMD | 0x40 and ends
 with the status error and status detail bytes.
+
+What real servos send beyond the packet layout, and how it is read here:
+- a position register's high byte carries flag bits above bit 1 (a public
+  capture of a DRS-0101 shows 0x62 for position 0x21F); positions are 10 bits,
+  as Dongbu's own libraries read them (`& 0x03` on the high byte);
+- the model is EEP 0 (Model No1: 0x01 DRS-0101, 0x02 DRS-0201) and EEP 1
+  (Model No2: 0x01); read as one little-endian register like every other;
+- voltage is 0.074 V per unit (manual: 0x5B = 6.714 V, 0x89 = 10 V);
+- temperature is a raw ADC value: see TEMPERATURE_TABLE.
 """
 
 from __future__ import annotations
 
 import enum
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -22,6 +32,23 @@ MIN_SIZE = 7
 MAX_SIZE = 223
 ACK_FLAG = 0x40
 PLAYTIME_SECONDS = 0.0112  # one play-time unit (DRS-0101)
+MAX_PLAYTIME = 0xFF  # 2.856 s
+POSITION_BITS = 0x03FF  # a position is 10 bits; the high byte's upper bits are flags
+VOLTS_PER_UNIT = 0.074
+# Model numbers: EEP 0-1 read as one little-endian register (Model No1 | Model No2 << 8).
+MODEL_DRS_0101 = 0x0101
+MODEL_DRS_0201 = 0x0102
+# EEP registers a servo answers (manual, non-volatile register map: addresses 0 to 53).
+EEP_SIZE = 54
+
+# Raw temperature (RAM 55, RAM 5) against degrees Celsius, interpolated linearly.
+# The manual's register map gives one point, the default Max Temperature 0xDF = 85 C.
+# PROVISIONAL: the manual's conversion table (its Reference section) could not be
+# consulted when this was written; the slope between the two ends below, 0.5 C per
+# unit, is an assumption to replace with that table before max_temperature_c is
+# trusted (docs/servos.md). The servo's own cut-off (RAM 5, in the same raw units)
+# does not depend on it.
+TEMPERATURE_TABLE: tuple[tuple[int, float], ...] = ((0x00, -26.5), (0xDF, 85.0), (0xFF, 101.0))
 
 
 class HerkulexError(CodecError):
@@ -52,6 +79,8 @@ class Ram(enum.IntEnum):
     MAX_TEMPERATURE = 5
     MIN_VOLTAGE = 6
     MAX_VOLTAGE = 7
+    MIN_POSITION = 20
+    MAX_POSITION = 22
     STATUS_ERROR = 48
     STATUS_DETAIL = 49
     TORQUE_CONTROL = 52
@@ -80,6 +109,13 @@ class Eep(enum.IntEnum):
     BAUD_RATE = 4
     ID = 6
     ACK_POLICY = 7
+    ALARM_LED_POLICY = 8
+    TORQUE_POLICY = 9
+    MAX_TEMPERATURE = 11
+    MIN_VOLTAGE = 12
+    MAX_VOLTAGE = 13
+    MIN_POSITION = 26
+    MAX_POSITION = 28
 
 
 class TorqueControl(enum.IntEnum):
@@ -91,11 +127,20 @@ class TorqueControl(enum.IntEnum):
 
 
 class AckPolicy(enum.IntEnum):
-    """Which commands a servo answers; the HAL assumes the factory READS_ONLY."""
+    """Which requests a servo answers (RAM 1, copied from EEP 7 at power-up).
 
-    NEVER = 0
-    READS_ONLY = 1  # the factory default: only RAM/EEP_READ and STAT answer
-    ALWAYS = 2
+    STAT is answered whatever the policy; a broadcast (id 0xFE) never is, STAT
+    excepted. The driver writes READS_ONLY to every servo at start and after a
+    reconnect, because a previous program may have left any value.
+    """
+
+    NEVER = 0  # STAT only
+    READS_ONLY = 1  # the factory default: RAM/EEP_READ and STAT
+    ALWAYS = 2  # writes and jogs too
+
+
+# Factory torque policy (manual, EEP 9 = 0x35): these errors release the torque.
+DEFAULT_TORQUE_POLICY = 0x35
 
 
 class StatusError(enum.IntFlag):
@@ -108,6 +153,12 @@ class StatusError(enum.IntFlag):
     OVERLOAD = 0x10
     DRIVER_FAULT = 0x20
     EEP_DISTORTED = 0x40
+
+
+# Errors that are about one packet or the servo's own position limits, not its health:
+# written back to zero as soon as they are seen (and logged), so that its LED stops
+# blinking and a later real error is not hidden behind them.
+TRANSIENT_ERRORS = StatusError.INVALID_PACKET | StatusError.EXCEED_POT_LIMIT
 
 
 class StatusDetail(enum.IntFlag):
@@ -316,3 +367,51 @@ def le16(value: int) -> bytes:
     """Two little-endian bytes; HerkulexError outside 0..65535."""
     _check("value", value, 0xFFFF)
     return bytes((value & 0xFF, value >> 8))
+
+
+def position(value: bytes) -> int:
+    """A position register (calibrated or absolute) as the servo means it: its low 10 bits.
+
+    A real DRS-0101 sets flag bits in the high byte (0x60 in a public capture);
+    Dongbu's libraries mask them off the same way. HerkulexError for a value
+    that is not two bytes.
+    """
+    if len(value) != 2:
+        raise HerkulexError(f"position of {len(value)} bytes, expected 2")
+    return u16(value) & POSITION_BITS
+
+
+def model_number(value: bytes) -> int:
+    """EEP 0-1 (Model No1, Model No2) as one little-endian number: 0x0101 is a DRS-0101."""
+    if len(value) != 2:
+        raise HerkulexError(f"model number of {len(value)} bytes, expected 2")
+    return u16(value)
+
+
+def voltage_v(raw: int) -> float:
+    """Volts of a voltage register (RAM 54, 6, 7): 0.074 V per unit."""
+    return raw * VOLTS_PER_UNIT
+
+
+def temperature_c(raw: int) -> float:
+    """Degrees Celsius of a raw temperature (RAM 55 or 5), from TEMPERATURE_TABLE.
+
+    HerkulexError for a raw value outside the table (a byte the servo cannot send).
+    """
+    return _interpolate(raw, TEMPERATURE_TABLE, "raw temperature")
+
+
+def raw_temperature(celsius: float) -> int:
+    """The raw reading nearest to `celsius` (for emulators and thresholds), clamped to the table."""
+    inverse = tuple((c, float(r)) for r, c in TEMPERATURE_TABLE)
+    low, high = inverse[0][0], inverse[-1][0]
+    return round(_interpolate(min(high, max(low, celsius)), inverse, "temperature"))
+
+
+def _interpolate(x: float, table: Sequence[tuple[float, float]], what: str) -> float:
+    if not table[0][0] <= x <= table[-1][0]:
+        raise HerkulexError(f"{what} {x} outside {table[0][0]}..{table[-1][0]}")
+    for (x0, y0), (x1, y1) in itertools.pairwise(table):
+        if x0 <= x <= x1:
+            return y0 + (y1 - y0) * (x - x0) / (x1 - x0)
+    raise HerkulexError(f"{what} {x} not covered")  # pragma: no cover - the bounds hold it

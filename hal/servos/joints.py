@@ -34,7 +34,7 @@ from hal.errors import (
     UnknownJoint,
     UnsafeCommand,
 )
-from hal.servos.api import Fault, FaultKind, JointStatus, Pose, ServoDriver
+from hal.servos.api import Fault, FaultKind, Health, JointStatus, Pose, ServoDriver
 from hal.servos.settings import JointSettings, ServoSettings
 
 log = structlog.get_logger("hal.servos.joints")
@@ -45,6 +45,21 @@ T = TypeVar("T")
 RANGE_TOLERANCE_DEG = 2.0
 # The motion profile's steepest slope relative to a constant-speed move (smoothstep).
 PROFILE_PEAK = 1.5
+# A servo this close to max_temperature_c is logged (once) before the fault latches.
+TEMPERATURE_WARNING_MARGIN_C = 5.0
+NEAR_TEMPERATURE_LIMIT = "NEAR_TEMPERATURE_LIMIT"
+# Readings outside these are no servo's: `servos read` and `check` name them.
+PLAUSIBLE_TEMPERATURE_C = (-20.0, 120.0)
+PLAUSIBLE_VOLTAGE_V = (4.0, 20.0)
+
+
+def impossible_reading(joint: JointSettings, raw: int) -> str:
+    """Why a reading cannot be trusted, naming what the joint's servo can report."""
+    model = joint.servo
+    return (
+        f"position reading {raw} is impossible for a {joint.model} "
+        f"(it reports {model.sensor_min} to {model.sensor_max})"
+    )
 
 
 def smoothstep(t: float) -> float:
@@ -75,6 +90,11 @@ class _Joint:
     def to_raw(self, degrees: float) -> int:
         s = self.settings
         return s.servo.to_raw(self.clamp(degrees), s.direction, s.offset_deg)
+
+    def to_raw_unclamped(self, degrees: float) -> int:
+        """Raw goal without the range clamp: only for a joint being brought into range."""
+        s = self.settings
+        return s.servo.to_raw(degrees, s.direction, s.offset_deg)
 
     def to_degrees(self, raw: int) -> float:
         s = self.settings
@@ -107,6 +127,7 @@ class Joints:
         self._poll_task: asyncio.Task[None] | None = None
         self._last_status: dict[str, JointStatus] = {}
         self._retried_seen: dict[str, int] = {}  # bus name -> replies retried, as last logged
+        self._bits: dict[tuple[str, str], int] = {}  # (joint, error bit) -> polls seen in a row
         self.step = 1.0 / settings.control_hz
 
     @classmethod
@@ -164,10 +185,13 @@ class Joints:
                     for joint in members:
                         await self._latch(joint.name, FaultKind.BUS_LOST, str(error), act=False)
                     continue
-                for servo_id, value in raw.items():
-                    joint = by_id[servo_id]
-                    joint.present = joint.to_degrees(value)
-                    joint.commanded = joint.clamp(joint.present)
+                impossible = self._take_readings(by_id, raw)
+                for joint, detail in impossible:
+                    await self._latch(joint.name, FaultKind.IMPOSSIBLE, detail, act=False)
+                for joint in members:
+                    if joint.present is not None:
+                        joint.commanded = joint.clamp(joint.present)
+            self._warn_outside(list(self._joints.values()))
         if poll:
             self._poll_task = asyncio.create_task(self._poll_forever(), name="servo health poll")
 
@@ -249,20 +273,18 @@ class Joints:
         await self.move(pose, duration)
 
     async def _power_on(self, joints: list[_Joint], strict: bool) -> None:
-        """Goal := present position, then torque on; never for a joint outside its range."""
+        """Goal := present position, then torque on; never for a joint outside its range.
+
+        A joint up to RANGE_TOLERANCE_DEG outside its range is held where it is,
+        then brought into range at its own speed limit (never snapped there in
+        one step). A joint whose servo cannot report its position (a hobby servo
+        without pulses) starts from where it was last commanded, or its rest.
+        """
         await self._read_present(joints)
-        outside = [
-            j for j in joints
-            if j.present is not None
-            and abs(j.clamp(j.present) - j.present) > RANGE_TOLERANCE_DEG
-        ]
+        outside = [j for j in joints if self._outside_by(j) > RANGE_TOLERANCE_DEG]
         if outside:
             # Torque on here would snap the joint back into range: leave it limp and say so.
-            described = "; ".join(
-                f"{j.name} at {j.present:.1f} deg (range {j.settings.range_deg[0]} to "
-                f"{j.settings.range_deg[1]})"
-                for j in outside
-            )
+            described = self._describe_outside(outside)
             if strict:
                 raise UnsafeCommand(f"outside the safe range, left compliant: {described}")
             log.warning("joints outside their safe range left compliant", joints=described)
@@ -270,11 +292,54 @@ class Joints:
         for driver, members in self._by_driver(joints).items():
             goals = {}
             for joint in members:
-                joint.commanded = joint.clamp(joint.present)  # type: ignore[arg-type]
-                limit = joint.settings.max_speed_dps
-                goals[joint.servo_id] = (joint.to_raw(joint.commanded), limit)
+                if joint.present is None:
+                    joint.present = (
+                        joint.commanded if joint.commanded is not None else joint.settings.rest_deg
+                    )
+                    log.info(
+                        "no position feedback: joint starts from its last or rest position",
+                        joint=joint.name, degrees=round(joint.present, 2),
+                    )
+                joint.commanded = joint.present  # hold where it is, even a little outside
+                s = joint.settings
+                raw = s.servo.to_raw(joint.commanded, s.direction, s.offset_deg)
+                goals[joint.servo_id] = (raw, s.max_speed_dps)
             await self._guarded(members[0], driver.write_goals(goals, self.step))
         await self._torque(joints, True)
+        for joint in joints:
+            joint.commanded = joint.present
+        edging = [j for j in joints if self._outside_by(j) > 0]
+        if edging:
+            # Into range at each joint's own speed limit, not in one control step.
+            log.info("joints brought into their safe range", joints=self._describe_outside(edging))
+            targets = {j.name: j.clamp(j.present) for j in edging}  # type: ignore[arg-type]
+            await self._run_profile(edging, targets, None, None)
+
+    @staticmethod
+    def _outside_by(joint: _Joint) -> float:
+        """Degrees the joint's present position lies outside its range (0 inside or unknown)."""
+        if joint.present is None:
+            return 0.0
+        return abs(joint.clamp(joint.present) - joint.present)
+
+    @staticmethod
+    def _describe_outside(joints: Iterable[_Joint]) -> str:
+        return "; ".join(
+            f"{j.name} at {j.present:.1f} deg (range {j.settings.range_deg[0]} to "
+            f"{j.settings.range_deg[1]})"
+            for j in joints
+        )
+
+    def _warn_outside(self, joints: list[_Joint]) -> None:
+        """One warning naming every joint found outside its range, whatever its group."""
+        outside = [j for j in joints if self._outside_by(j) > 0]
+        if outside:
+            log.warning(
+                "joints found outside their safe range",
+                joints=self._describe_outside(outside),
+                count=len(outside),
+                groups=sorted({j.settings.group for j in outside}),
+            )
 
     async def clear_faults(self) -> None:
         """Reset the faulty servos' error state and forget every latched fault.
@@ -306,12 +371,16 @@ class Joints:
         return found
 
     async def survey(self) -> list[JointStatus]:
-        """Every joint's position and health, without latching anything."""
+        """Every joint's position and health, without latching anything.
+
+        Each status names what is impossible or unsafe in its readings (`problems`)
+        and the error bits its servo reported (`flags`).
+        """
         statuses = []
         for joint in self._joints.values():
             fault = next((f for f in self._faults if f.joint == joint.name), None)
             try:
-                raw = await joint.driver.read_positions([joint.servo_id])
+                raw = (await joint.driver.read_positions([joint.servo_id]))[joint.servo_id]
                 health = await joint.driver.read_health(joint.servo_id)
             except BusError as error:
                 lost = isinstance(error, PortUnavailable)
@@ -321,18 +390,47 @@ class Joints:
                 continue
             if health.kind is not None and fault is None:
                 fault = Fault(joint.name, health.kind, ", ".join(health.flags), self.clock.now())
+            position, problems = self._judge(joint, raw, health)
             statuses.append(
                 JointStatus(
                     joint.name,
-                    joint.to_degrees(raw[joint.servo_id]),
+                    position,
                     bool(joint.torque),
                     health.temperature_c,
                     health.voltage_v,
                     health.load,
                     fault,
+                    raw_position=raw,
+                    flags=health.flags,
+                    problems=tuple(problems),
                 )
             )
         return statuses
+
+    def _judge(self, joint: _Joint, raw: int, health: Health) -> tuple[float | None, list[str]]:
+        """The joint's position in degrees (None if unknown) and what is wrong with its readings."""
+        model = joint.settings.servo
+        problems = []
+        position = None
+        if not model.readable(raw):
+            problems.append(impossible_reading(joint.settings, raw))
+        elif raw != model.off_reading:
+            position = joint.to_degrees(raw)
+            low, high = joint.settings.range_deg
+            if not low <= position <= high:
+                problems.append(f"outside its safe range: {position:.1f} deg ({low} to {high})")
+        temperature, voltage = health.temperature_c, health.voltage_v
+        if temperature is not None:
+            if not PLAUSIBLE_TEMPERATURE_C[0] <= temperature <= PLAUSIBLE_TEMPERATURE_C[1]:
+                problems.append(f"temperature {temperature:.0f} C is impossible")
+            elif temperature >= self.settings.max_temperature_c:
+                problems.append(
+                    f"too hot: {temperature:.0f} C >= max_temperature_c "
+                    f"{self.settings.max_temperature_c:.0f} C"
+                )
+        if voltage is not None and not PLAUSIBLE_VOLTAGE_V[0] <= voltage <= PLAUSIBLE_VOLTAGE_V[1]:
+            problems.append(f"voltage {voltage:.1f} V is impossible")
+        return position, problems
 
     # --- health polling -----------------------------------------------------------------
 
@@ -361,6 +459,12 @@ class Joints:
                 await self._bus_lost(self._on_driver(joint.driver), error)
                 continue
             self._recovered(joint.name)
+            self._note_bits(joint.name, health)
+            position = health.position
+            if position is not None and not joint.settings.servo.readable(position):
+                detail = impossible_reading(joint.settings, position)
+                self._repeat(joint.name, FaultKind.IMPOSSIBLE.value, detail)
+                await self._latch(joint.name, FaultKind.IMPOSSIBLE, detail)
             kind, detail = health.kind, ", ".join(health.flags)
             limit = self.settings.max_temperature_c
             hot = health.temperature_c
@@ -370,6 +474,33 @@ class Joints:
                 self._repeat(joint.name, kind.value, detail)
                 await self._latch(joint.name, kind, detail or kind.value)
         self._log_retries()
+
+    def _note_bits(self, joint: str, health: Health) -> None:
+        """Log each error bit (and a servo nearing its temperature limit) once, then its count.
+
+        The servo's LED blinks for a latched bit; without this the controller would
+        ignore it silently. Bits the driver cleared at once say so.
+        """
+        seen = set(health.flags)
+        limit = self.settings.max_temperature_c
+        hot = health.temperature_c
+        if hot is not None and limit - TEMPERATURE_WARNING_MARGIN_C <= hot < limit:
+            seen.add(NEAR_TEMPERATURE_LIMIT)
+        for bit in sorted(seen):
+            key = (joint, bit)
+            count = self._bits.get(key, 0)
+            self._bits[key] = count + 1
+            if count:
+                continue
+            if bit == NEAR_TEMPERATURE_LIMIT:
+                log.warning("servo temperature near its limit", joint=joint,
+                            temperature_c=round(hot or 0.0, 1), max_temperature_c=limit)
+            else:
+                log.warning("servo error bit", joint=joint, bit=bit,
+                            cleared=bit in health.cleared)
+        for key in [k for k in self._bits if k[0] == joint and k[1] not in seen]:
+            log.info("servo error bit no longer seen", joint=joint, bit=key[1],
+                     times=self._bits.pop(key))
 
     def _log_retries(self) -> None:
         """Replies the bus had to retry since the last poll: one line per poll at most.
@@ -450,8 +581,13 @@ class Joints:
                 goals = {}
                 for joint in members:
                     start, end = starts[joint.name], targets[joint.name]
-                    joint.commanded = joint.clamp(start + (end - start) * fraction)
-                    goals[joint.servo_id] = (joint.to_raw(joint.commanded), limits[joint.name])
+                    # Clamped to the range, widened only to include a start found outside it
+                    # (a joint being brought into range): never a step beyond either.
+                    low, high = joint.settings.range_deg
+                    low, high = min(low, start), max(high, start)
+                    joint.commanded = max(low, min(high, start + (end - start) * fraction))
+                    goals[joint.servo_id] = (joint.to_raw_unclamped(joint.commanded),
+                                             limits[joint.name])
                 await self._guarded(members[0], driver.write_goals(goals, self.step))
             # Absolute schedule: a late step is not followed by a catch-up burst.
             delay = begin + k * self.step - self.clock.now()
@@ -482,8 +618,33 @@ class Joints:
             except PortUnavailable as error:
                 await self._bus_lost(self._on_driver(driver), error)
                 raise ServoFaultError(str(error)) from error
-            for servo_id, value in raw.items():
-                by_id[servo_id].present = by_id[servo_id].to_degrees(value)
+            impossible = self._take_readings(by_id, raw)
+            for joint, detail in impossible:
+                await self._latch(joint.name, FaultKind.IMPOSSIBLE, detail)
+            if impossible:
+                raise ServoFaultError("; ".join(f"{j.name}: {d}" for j, d in impossible))
+
+    def _take_readings(
+        self, by_id: Mapping[int, _Joint], raw: Mapping[int, int]
+    ) -> list[tuple[_Joint, str]]:
+        """Store each reading as the joint's present position; return the impossible ones.
+
+        A reading the servo cannot give is never turned into degrees (it would be a
+        plausible-looking nonsense angle); an off reading (no feedback) leaves the
+        position unknown.
+        """
+        impossible = []
+        for servo_id, value in raw.items():
+            joint = by_id[servo_id]
+            model = joint.settings.servo
+            if not model.readable(value):
+                joint.present = None
+                impossible.append((joint, impossible_reading(joint.settings, value)))
+            elif value == model.off_reading:
+                joint.present = None
+            else:
+                joint.present = joint.to_degrees(value)
+        return impossible
 
     async def _torque(self, joints: list[_Joint], on: bool) -> None:
         for driver, members in self._by_driver(joints).items():

@@ -25,7 +25,7 @@ import msgspec
 from hal.errors import SettingsError, UnknownBus
 
 Protocol = Literal["dynamixel1", "dynamixel2", "herkulex", "maestro"]
-ModelName = Literal["ax-12a", "xl430-w250", "drs-0101", "hs-82mg"]
+ModelName = Literal["ax-12a", "xl430-w250", "drs-0101", "drs-0201", "hs-82mg"]
 Baud = Literal[
     9600, 19200, 38400, 57600, 115200, 200000, 250000, 400000, 500000,
     666666, 1000000, 2000000, 3000000,
@@ -43,7 +43,13 @@ Finite = Annotated[
 
 @dataclass(frozen=True, slots=True)
 class ServoModel:
-    """A servo model's raw position units and how they map to degrees."""
+    """A servo model's raw position units, how they map to degrees, and what it can report.
+
+    `raw_min`..`raw_max` is what it can be commanded to; `sensor_min`..`sensor_max`
+    what a position reading can be (anything else is an impossible reading, a
+    fault, never "ok"); `off_reading` is the reading of a servo whose position is
+    unknown (a hobby servo without pulses), None where every reading is a position.
+    """
 
     protocol: Protocol
     raw_min: int
@@ -51,6 +57,13 @@ class ServoModel:
     raw_centre: int
     degrees_per_unit: float
     model_number: int | None  # what a ping or scan reports, where the protocol has one
+    sensor_min: int
+    sensor_max: int
+    off_reading: int | None = None
+
+    def readable(self, raw: int) -> bool:
+        """True when `raw` is a reading this servo can give (a position, or its off reading)."""
+        return raw == self.off_reading or self.sensor_min <= raw <= self.sensor_max
 
     def to_degrees(self, raw: float, direction: int, offset: float) -> float:
         """Degrees of a joint whose servo reads `raw`, given its direction (+1/-1) and offset."""
@@ -67,14 +80,17 @@ class ServoModel:
         return ends[0], ends[1]
 
 
-# From the makers' manuals: AX-12A 0-1023 over 300 degrees; XL430 0-4095 over 360;
-# DRS-0101 21-1002 at 0.325 degrees per unit; a Maestro target is in quarter-microseconds
-# and an HS-82MG turns about 0.09 degrees per microsecond around 1500 us (992-2000 us).
+# From the makers' manuals: AX-12A 0-1023 over 300 degrees; XL430 0-4095 over 360
+# (position mode); DRS-0101 and DRS-0201 21-1002 commandable (EEP min/max position
+# defaults) of a 10-bit reading, 0.325 degrees per unit; a Maestro target is in
+# quarter-microseconds, 992-2000 us by default, and an HS-82MG turns about 0.09
+# degrees per microsecond around 1500 us. A Maestro channel without pulses reads 0.
 MODELS: dict[str, ServoModel] = {
-    "ax-12a": ServoModel("dynamixel1", 0, 1023, 512, 300 / 1024, 12),
-    "xl430-w250": ServoModel("dynamixel2", 0, 4095, 2048, 360 / 4096, 1060),
-    "drs-0101": ServoModel("herkulex", 21, 1002, 512, 0.325, 0x0101),
-    "hs-82mg": ServoModel("maestro", 3968, 8000, 6000, 0.0225, None),
+    "ax-12a": ServoModel("dynamixel1", 0, 1023, 512, 300 / 1024, 12, 0, 1023),
+    "xl430-w250": ServoModel("dynamixel2", 0, 4095, 2048, 360 / 4096, 1060, 0, 4095),
+    "drs-0101": ServoModel("herkulex", 21, 1002, 512, 0.325, 0x0101, 0, 1023),
+    "drs-0201": ServoModel("herkulex", 21, 1002, 512, 0.325, 0x0102, 0, 1023),
+    "hs-82mg": ServoModel("maestro", 3968, 8000, 6000, 0.0225, None, 3968, 8000, off_reading=0),
 }
 
 
@@ -157,7 +173,8 @@ class ServoSettings(_Settings, frozen=True):
     poll_interval_s: Annotated[float, msgspec.Meta(ge=0.05, le=60, extra={"unit": "s"})] = 1.0
     # Rate of goal updates during a move.
     control_hz: Annotated[float, msgspec.Meta(ge=1, le=200, extra={"unit": "Hz"})] = 50.0
-    max_temperature_c: float = 65.0  # a fault before the servo's own shutdown
+    # A fault before the servo's own shutdown; a warning is logged this many degrees before.
+    max_temperature_c: Annotated[float, msgspec.Meta(ge=20, le=120, extra={"unit": "C"})] = 65.0
     buses: tuple[BusSettings, ...] = ()
     joints: tuple[JointSettings, ...] = ()
 
