@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
 
 import pytest
 import structlog
@@ -382,3 +383,127 @@ async def test_rest_leaves_a_joint_made_compliant_on_purpose_limp():
     await servos.set_compliant("left_arm", True)
     await servos.rest()
     assert not servos.servo("left_elbow").torque and servos.servo("torso").torque
+
+
+# --- the stricter servos: temperature, latched bits, impossible readings, start-up ----------
+
+
+def herkulex_head(emulator_path):
+    return servo_settings(
+        backend="real",
+        buses=(servo_settings().buses[1].__class__(
+            name="head", port=str(emulator_path), protocol="herkulex", baud=115200),),
+        joints=servo_settings().joints[3:],
+        max_temperature_c=65.0,
+    )
+
+
+async def test_a_hot_herkulex_is_warned_about_then_latched_before_its_own_cutoff(tmp_path):
+    from emulators.herkulex import HerkulexEmulator
+
+    from hal.servos import herkulex as hx
+
+    clock = FakeClock()
+    with HerkulexEmulator(tmp_path / "ttyHX", ids=[1, 2], clock=clock.now,
+                          heat_c_per_s=1.0) as emulator:
+        settings = herkulex_head(emulator.path)
+        joints = Joints(settings, {"head": make_driver("herkulex", emulator.path, baud=115200)},
+                        clock)
+        await joints.start(poll=False)
+        try:
+            await joints.set_compliant("head", False)
+            emulator.set_load(2, 1.0)  # head_pitch holds the head up against a hand
+            with structlog.testing.capture_logs() as logs:
+                seen = []
+                while not joints.faults:
+                    clock.t += 1.0
+                    await joints.poll_health()
+                    statuses = {s.joint: s for s in await joints.survey()}
+                    seen.append(statuses["head_pitch"].temperature_c)
+            warnings = [e for e in logs if e["event"] == "servo temperature near its limit"]
+            assert [w["joint"] for w in warnings] == ["head_pitch"]  # once, not every poll
+            assert 60.0 <= warnings[0]["temperature_c"] < 65.0
+            (fault,) = joints.faults
+            assert (fault.joint, fault.kind) == ("head_pitch", FaultKind.OVERHEATING)
+            assert seen == sorted(seen) and seen[-1] >= 65.0  # it rose under load
+            # The controller acted first: the servo's own 85 C cut-off has not been reached.
+            assert not emulator.servos[2].latched & hx.StatusError.EXCEED_TEMPERATURE
+            assert not emulator.torque_on(2) and emulator.torque_on(1)  # freed; the other holds
+        finally:
+            await joints.close()
+
+
+async def test_a_latched_error_bit_is_logged_once_with_its_count_and_cleared(tmp_path):
+    from emulators.herkulex import HerkulexEmulator
+
+    from hal.servos import herkulex as hx
+
+    with HerkulexEmulator(tmp_path / "ttyHX", ids=[1, 2]) as emulator:
+        settings = herkulex_head(emulator.path)
+        joints = Joints(settings, {"head": make_driver("herkulex", emulator.path, baud=115200)},
+                        FakeClock())
+        await joints.start(poll=False)
+        try:
+            with structlog.testing.capture_logs() as logs:
+                for _ in range(3):
+                    emulator.latch(1, int(hx.StatusError.INVALID_PACKET))  # noise on the line
+                    await joints.poll_health()
+                    assert emulator.servos[1].latched == 0  # cleared: the LED stops blinking
+                await joints.poll_health()
+            bits = [e for e in logs if e["event"] == "servo error bit"]
+            assert [(b["joint"], b["bit"], b["cleared"]) for b in bits] == [
+                ("head_yaw", "INVALID_PACKET", True)
+            ]
+            (ended,) = [e for e in logs if e["event"] == "servo error bit no longer seen"]
+            assert (ended["joint"], ended["times"]) == ("head_yaw", 3)
+            assert joints.faults == ()  # a packet error is not a fault of the servo
+        finally:
+            await joints.close()
+
+
+async def test_an_impossible_reading_is_a_named_fault_never_a_position(tmp_path):
+    settings = servo_settings(buses=servo_settings().buses[:1], joints=servo_settings().joints[:3])
+    with Dynamixel1Emulator(tmp_path / "ttyAX", ids=[1, 2, 3]) as emulator:
+        emulator.set_present(3, 7990)  # an AX-12A reports 0..1023
+        joints = Joints(settings, {"body": make_driver("dynamixel1", emulator.path)}, FakeClock())
+        await joints.start(poll=False)
+        try:
+            (fault,) = joints.faults
+            assert (fault.joint, fault.kind) == ("torso", FaultKind.IMPOSSIBLE)
+            assert "7990" in fault.detail and "0 to 1023" in fault.detail
+            statuses = {s.joint: s for s in await joints.survey()}
+            assert statuses["torso"].position_deg is None and not statuses["torso"].healthy
+            assert statuses["left_shoulder"].healthy
+            with pytest.raises(ServoFaultError, match="torso"):
+                await joints.set_compliant("body", False)
+        finally:
+            await joints.close()
+
+
+async def test_a_joint_just_outside_its_range_is_brought_in_at_its_speed_limit():
+    servos = await started()
+    await servos.set_compliant("body", True)
+    servos.push("torso", 31.8)  # range -30..30, within the 2 degree tolerance
+    servos.drivers["body"].writes.clear()
+    await servos.set_compliant("body", False)
+    torso = joint_settings(servos, "torso")
+    goals = [torso.servo.to_degrees(w.goals[3], 1, 0.0) for w in servos.drivers["body"].writes]
+    assert goals[0] == pytest.approx(31.8, abs=0.3)  # first: hold where it is
+    assert goals[-1] == pytest.approx(30.0, abs=0.3)
+    limit = torso.max_speed_dps * servos.step + torso.servo.degrees_per_unit
+    assert all(abs(b - a) <= limit for a, b in itertools.pairwise(goals))
+    assert len(goals) > 3  # not snapped in one control step (1.8 deg at 20 deg/s)
+    assert servos.true_position("torso") == pytest.approx(30.0, abs=0.3)
+
+
+async def test_every_joint_outside_its_range_is_named_at_start_whatever_its_group():
+    servos = SimServos(servo_settings(), FakeClock())
+    for name, degrees in (("left_shoulder", 100.0), ("head_pitch", -40.0)):
+        settings = joint_settings(servos, name)
+        servos.servo(name).present = settings.servo.to_raw(degrees, settings.direction,
+                                                           settings.offset_deg)
+    with structlog.testing.capture_logs() as logs:
+        await servos.start(poll=False)
+    (warning,) = [e for e in logs if e["event"] == "joints found outside their safe range"]
+    assert "left_shoulder" in warning["joints"] and "head_pitch" in warning["joints"]
+    assert warning["groups"] == ["head", "left_arm"] and warning["count"] == 2

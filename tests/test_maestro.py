@@ -107,8 +107,59 @@ async def test_driver_sets_targets_in_one_write_and_reads_them_back(maestro):
         await eventually(arrived)
         await driver.set_torque([0], False)
         await eventually(lambda: maestro.targets[0] == 0)  # pulses off: the servo is limp
+        assert (await driver.read_positions([0, 1]))[0] == 0  # and its position is unknown
     finally:
         await driver.close()
+
+
+async def test_channels_start_off_and_read_0_as_a_real_maestro_does(maestro):
+    driver = make_driver("maestro", maestro.path, baud=115200)
+    await driver.start()
+    try:
+        assert await driver.read_positions([0, 3]) == {0: 0, 3: 0}
+    finally:
+        await driver.close()
+
+
+async def test_eye_joints_without_feedback_start_from_rest_and_come_back_where_they_were(
+    tmp_path, maestro
+):
+    from servo_fixtures import FakeClock
+
+    from hal.servos.joints import Joints
+    from hal.servos.settings import BusSettings, JointSettings, ServoSettings
+
+    settings = ServoSettings(
+        backend="real",
+        buses=(BusSettings(name="eyes", port=str(maestro.path), protocol="maestro",
+                           baud=115200),),
+        joints=(
+            JointSettings(name="left_eyelid", bus="eyes", id=0, model="hs-82mg",
+                          range_deg=(-15.0, 15.0), rest_deg=5.0, max_speed_dps=90.0,
+                          group="eyes"),
+            JointSettings(name="right_eyelid", bus="eyes", id=1, model="hs-82mg",
+                          range_deg=(-15.0, 15.0), rest_deg=-5.0, max_speed_dps=90.0,
+                          group="eyes"),
+        ),
+    )
+    joints = Joints(settings, {"eyes": make_driver("maestro", maestro.path, baud=115200)},
+                    FakeClock())
+    await joints.start(poll=False)
+    try:
+        assert joints.faults == ()  # 0 is "no pulses", not an impossible position
+        assert await joints.read_positions("eyes") == {}
+        await joints.set_compliant("eyes", False)  # no feedback: each starts from its rest
+        assert await joints.read_positions("eyes") == pytest.approx(
+            {"left_eyelid": 5.0, "right_eyelid": -5.0}, abs=0.05)
+        await joints.move({"left_eyelid": 10.0})
+        await joints.set_compliant("left_eyelid", True)
+        await joints.set_compliant("left_eyelid", False)  # back where it was last sent
+        assert (await joints.read_positions("left_eyelid"))["left_eyelid"] == pytest.approx(
+            10.0, abs=0.05)
+        statuses = {s.joint: s for s in await joints.survey()}
+        assert all(s.healthy for s in statuses.values())
+    finally:
+        await joints.close()
 
 
 async def test_a_silent_maestro_is_reported(maestro):

@@ -20,23 +20,33 @@ def _restore_logging():
 
 
 @pytest.mark.parametrize(
-    ("protocol", "emulator_type", "model", "position"),
+    ("protocol", "emulator_type", "model", "positions"),
     [
-        ("dynamixel1", Dynamixel1Emulator, "ax-12a", 512),
-        ("dynamixel2", Dynamixel2Emulator, "xl430-w250", 2048),
-        ("herkulex", HerkulexEmulator, "drs-0101", 512),
+        ("dynamixel1", Dynamixel1Emulator, "ax-12a", (512, 512)),
+        ("dynamixel2", Dynamixel2Emulator, "xl430-w250", (2048, 2048)),
+        ("herkulex", HerkulexEmulator, "drs-0101", (514, 507)),  # each servo where it is
     ],
 )
 def test_scan_lists_the_answering_ids_as_json(tmp_path, capsys, protocol, emulator_type, model,
-                                              position):
+                                              positions):
     with emulator_type(tmp_path / "tty", ids=[2, 5]):
         code = main(["servos", "scan", "--port", str(tmp_path / "tty"), "--protocol", protocol,
                      "--baud", "1000000", "--ids", "1-6", "--margin-ms", "100", "--json"])
     assert code == 0
     found = json.loads(capsys.readouterr().out)
     assert [(s["id"], s["model"], s["position"]) for s in found] == [
-        (2, model, position), (5, model, position),
+        (2, model, positions[0]), (5, model, positions[1]),
     ]
+
+
+def test_scan_names_a_drs_0201_by_its_model_number(tmp_path, capsys):
+    with HerkulexEmulator(tmp_path / "tty", ids=[3], models={3: "drs-0201"}, ack_policy=0):
+        code = main(["servos", "scan", "--port", str(tmp_path / "tty"), "--protocol",
+                     "herkulex", "--baud", "115200", "--ids", "3", "--margin-ms", "100",
+                     "--json"])
+    assert code == 0
+    (found,) = json.loads(capsys.readouterr().out)
+    assert (found["model"], found["model_number"]) == ("drs-0201", 0x0102)
 
 
 def test_scan_of_a_missing_port_fails_with_a_message(tmp_path, capsys):

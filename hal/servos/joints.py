@@ -74,6 +74,7 @@ class _Joint:
     commanded: float | None = None  # the last goal sent, in degrees
     present: float | None = None
     torque: bool | None = None  # None until we have set it
+    last_sent: float | None = None  # the last goal before torque went off (hobby servos)
 
     @property
     def name(self) -> str:
@@ -293,9 +294,8 @@ class Joints:
             goals = {}
             for joint in members:
                 if joint.present is None:
-                    joint.present = (
-                        joint.commanded if joint.commanded is not None else joint.settings.rest_deg
-                    )
+                    last = joint.commanded if joint.commanded is not None else joint.last_sent
+                    joint.present = last if last is not None else joint.settings.rest_deg
                     log.info(
                         "no position feedback: joint starts from its last or rest position",
                         joint=joint.name, degrees=round(joint.present, 2),
@@ -652,6 +652,8 @@ class Joints:
             for joint in members:
                 joint.torque = on
                 if not on:
+                    if joint.commanded is not None:
+                        joint.last_sent = joint.commanded
                     joint.commanded = None
 
     async def _bus_lost(self, joints: list[_Joint], error: BaseException) -> None:
@@ -686,6 +688,8 @@ class Joints:
                 continue
             for joint in members:
                 joint.torque = False
+                if joint.commanded is not None:
+                    joint.last_sent = joint.commanded
                 joint.commanded = None
 
     def _repeat(self, key: str, kind: str, detail: str) -> None:

@@ -10,7 +10,7 @@ limits and fault handling that drive the robot.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from hal.clock import Clock
@@ -31,6 +31,14 @@ class SimServo:
     torque: bool = False
     temperature_c: float = 35.0
     fault: FaultKind | None = None  # SILENT makes it stop answering
+    # A hand holding the limp horn: raw position as a function of the clock's time.
+    hand: Callable[[float], float] | None = None
+
+    def reading(self) -> int:
+        """What the servo reports: its position, or the model's off reading (no feedback, limp)."""
+        if not self.torque and self.model.off_reading is not None:
+            return self.model.off_reading
+        return round(self.present)
 
 
 @dataclass
@@ -56,6 +64,8 @@ class SimDriver:
         elapsed = 0.0 if self._stamp is None else now - self._stamp
         self._stamp = now
         for servo in self.servos.values():
+            if not servo.torque and servo.hand is not None:
+                servo.present = servo.goal = servo.hand(now)
             if not servo.torque or servo.fault is FaultKind.SILENT:
                 continue
             step = servo.speed * elapsed
@@ -89,7 +99,7 @@ class SimDriver:
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
         """Present raw positions, moved up to now; ServoSilent for a silent or missing servo."""
         self._advance()
-        return {servo_id: round(self._answering(servo_id).present) for servo_id in ids}
+        return {servo_id: self._answering(servo_id).reading() for servo_id in ids}
 
     async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
         """Record the packet, then set each servo's goal and speed, turning its torque on.
@@ -128,7 +138,7 @@ class SimDriver:
         self._advance()
         servo = self._answering(servo_id)
         return Health(
-            position=round(servo.present),
+            position=servo.reading(),
             temperature_c=servo.temperature_c,
             voltage_v=12.0,
             load=0.0,
@@ -176,6 +186,26 @@ class SimServos(Joints):
             servo.present = servo.goal = settings.servo.to_raw(
                 degrees, settings.direction, settings.offset_deg
             )
+
+    def hand(self, joint: str, path: Callable[[float], float] | None) -> None:
+        """From now on a hand holds the joint: while it is limp it follows `path(time)` degrees.
+
+        `time` is the clock's; None lets go. Used to demonstrate calibration and poses
+        without a robot (and by their tests).
+        """
+        settings = self._joint_settings(joint)
+        servo = self.servo(joint)
+        if path is None:
+            servo.hand = None
+            return
+
+        def raw(now: float) -> float:
+            degrees = path(now)
+            return settings.servo.raw_centre + settings.direction * (
+                degrees - settings.offset_deg
+            ) / settings.servo.degrees_per_unit
+
+        servo.hand = raw
 
     def true_position(self, joint: str) -> float:
         """Where the simulated joint really is, in degrees (for tests and the demo)."""

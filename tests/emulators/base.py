@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import heapq
 import os
 import queue
 import select
@@ -29,17 +30,22 @@ class Faults:
 
 @dataclass
 class Axis:
-    """One servo's shaft: moves toward its goal at `rate` units per second while torque is on."""
+    """One servo's shaft: moves toward its goal while torque is on.
+
+    At `speed` units per second when a command set one (a HerkuleX play time),
+    else at `rate`, the servo's own speed.
+    """
 
     present: float
     goal: float
     rate: float
     torque: bool = False
     stamp: float | None = None  # the emulator clock's time of the last update
+    speed: float | None = None
 
     def update(self, now: float) -> int:
         if self.torque and self.stamp is not None:
-            step = self.rate * (now - self.stamp)
+            step = (self.rate if self.speed is None else self.speed) * (now - self.stamp)
             delta = self.goal - self.present
             self.present = self.goal if abs(delta) <= step else self.present + step * (
                 1 if delta > 0 else -1
@@ -59,6 +65,10 @@ class Emulator:
         self.faults = Faults()
         self.received: list[bytes] = []  # every well-framed request, for assertions
         self.replies = 0
+        # Seconds between a request and its reply, as a servo's return delay and the wire
+        # make it: a reply the driver did not wait for then lands in its next exchange.
+        self.reply_delay = 0.0
+        self._due: list[tuple[float, int, bytes]] = []  # (monotonic time, order, reply)
         self._buffer = b""
         self._wake_r, self._wake_w = os.pipe()
         self._commands: queue.Queue[tuple[Callable[[], None], threading.Event]] = queue.Queue()
@@ -125,7 +135,12 @@ class Emulator:
     def _serve(self) -> None:
         while self._running:
             watched = [self._wake_r] + ([self.port.master] if self.port.master is not None else [])
-            ready, _, _ = select.select(watched, [], [])
+            wait = None
+            if self._due:
+                wait = max(0.0, self._due[0][0] - time.monotonic())
+            ready, _, _ = select.select(watched, [], [], wait)
+            while self._due and self._due[0][0] <= time.monotonic():
+                self.port.write(heapq.heappop(self._due)[2])
             if self._wake_r in ready:
                 os.read(self._wake_r, 64)
                 while not self._commands.empty():
@@ -158,7 +173,11 @@ class Emulator:
             faults.corrupt_next = max(0, faults.corrupt_next - 1)
             reply = self.corrupt(reply)
         self.replies += 1
-        self.port.write(reply)
+        if self.reply_delay > 0:
+            due = time.monotonic() + self.reply_delay
+            heapq.heappush(self._due, (due, self.replies, reply))
+        else:
+            self.port.write(reply)
 
 
 def split_with(

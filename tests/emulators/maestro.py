@@ -1,4 +1,11 @@
-"""A Pololu Mini Maestro on a pty: compact protocol, targets, speed limits, errors."""
+"""A Pololu Mini Maestro on a pty: compact protocol, targets, speed limits, errors.
+
+As the Maestro user's guide describes it: channels start off (no pulses, the
+default start-up setting) and Get Position of a channel without pulses reads 0;
+a target of 0 stops the pulses; pulses resume at the new target at once (there
+is no position to ramp from); a hobby servo has no feedback, so a position is
+the pulse width being sent, never where a hand put the horn.
+"""
 
 from __future__ import annotations
 
@@ -16,7 +23,7 @@ class MaestroEmulator(Emulator):
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.channels = channels
-        self.axes = [Axis(6000, 6000, rate) for _ in range(channels)]
+        self.axes = [Axis(0, 0, rate) for _ in range(channels)]
         self.targets = [0] * channels
         self.errors = 0
         super().__init__(path, clock)
@@ -43,10 +50,12 @@ class MaestroEmulator(Emulator):
             return
         axis = self.axes[channel]
         axis.update(self.clock())
+        was_off = self.targets[channel] == 0
         self.targets[channel] = target
         axis.torque = target != 0  # target 0 stops the pulses: the servo goes limp
-        if target:
-            axis.goal = target
+        axis.goal = target
+        if was_off or not target:
+            axis.present = target  # pulses stop at once, and start again at the target
 
     def handle(self, packet: bytes) -> list[tuple[int, bytes]]:
         try:
