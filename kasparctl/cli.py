@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "run",
     "install",
     "servos",
+    "pose",
     "say",
     "sessions",
     "export",

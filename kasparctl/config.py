@@ -7,6 +7,7 @@ to a default in front of children.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import tomllib
@@ -202,6 +203,10 @@ class Config(_Settings, frozen=True):
     state_dir: str = "/var/lib/kaspar"
     # A directory of phrase files that overrides the shipped ones.
     phrases_dir: str | None = None
+    # Poses recorded by demonstration (`kasparctl pose record`), relative to this file.
+    # Its "happy" and "sad" poses are the game's expressions, a pose named like a pilot
+    # location is where Kaspar points for it, and "rest" gives the joints' rest positions.
+    poses_file: str | None = None
     language: str = "en"
     logging: LoggingSettings = LoggingSettings()
     learner: LearnerSettings = LearnerSettings()
@@ -223,18 +228,28 @@ class Config(_Settings, frozen=True):
         return plan.group_size or self.game.children_per_group
 
 
-def load_config(path: str | Path) -> Config:
-    """Read and validate a configuration file; ConfigError says what is wrong and where."""
+def load_config(path: str | Path, *, poses: bool = True) -> Config:
+    """Read and validate a configuration file; ConfigError says what is wrong and where.
+
+    `poses=False` leaves the poses file unread (the bring-up commands that write it
+    read it themselves, pose by pose).
+    """
     path = Path(path)
     try:
         data = path.read_bytes()
     except OSError as error:
         raise ConfigError(str(path), "(file)", f"cannot read it: {error.strerror}") from error
-    return parse_config(data, str(path), base_dir=path.parent)
+    return parse_config(data, str(path), base_dir=path.parent, poses=poses)
 
 
-def parse_config(data: bytes | str, source: str, base_dir: Path | None = None) -> Config:
-    """Validate a configuration's text; `source` names it in errors, `base_dir` anchors paths."""
+def parse_config(
+    data: bytes | str, source: str, base_dir: Path | None = None, *, poses: bool = True
+) -> Config:
+    """Validate a configuration's text; `source` names it in errors, `base_dir` anchors paths.
+
+    With `poses`, the poses file (if named) fills the game's poses and the rest
+    positions; see apply_poses_file.
+    """
     text = data.decode("utf-8", errors="replace") if isinstance(data, bytes) else data
     try:
         raw = tomllib.loads(text)
@@ -248,6 +263,8 @@ def parse_config(data: bytes | str, source: str, base_dir: Path | None = None) -
     _validate(config, source)
     if base_dir is not None:
         config = _resolve_paths(config, base_dir)
+    if poses and config.poses_file is not None:
+        config = apply_poses_file(config, source)
     return config
 
 
@@ -256,7 +273,115 @@ def _resolve_paths(config: Config, base_dir: Path) -> Config:
     changes: dict[str, Any] = {"state_dir": str(base_dir / config.state_dir)}
     if config.phrases_dir is not None:
         changes["phrases_dir"] = str(base_dir / config.phrases_dir)
+    if config.poses_file is not None:
+        changes["poses_file"] = str(base_dir / config.poses_file)
     return msgspec.structs.replace(config, **changes)
+
+
+# --- the poses file (kept apart: only poses_file reaches here) ---------------------------
+
+# The poses the game takes from the poses file, besides the pilot's locations.
+REST_POSE = "rest"
+HAPPY_POSE = "happy"
+SAD_POSE = "sad"
+
+
+def read_poses(path: str | Path) -> dict[str, dict[str, float]]:
+    """The poses of a poses file: `[name]` tables of joint = degrees.
+
+    ConfigError names the file, and the pose and joint at fault, for a file that
+    cannot be read or parsed and for a value that is not a finite number.
+    """
+    source = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as error:
+        raise ConfigError(source, "(file)", f"cannot read it: {error.strerror}") from error
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(source, "(syntax)", f"not valid TOML: {error}") from error
+    poses: dict[str, dict[str, float]] = {}
+    for name, table in raw.items():
+        if not isinstance(table, dict):
+            found = type(table).__name__
+            raise ConfigError(source, name, f"expected a [{name}] table of joint = degrees, "
+                              f"found a {found}")
+        pose = {}
+        for joint, degrees in table.items():
+            if isinstance(degrees, bool) or not isinstance(degrees, int | float) or not (
+                math.isfinite(degrees)
+            ):
+                raise ConfigError(source, f"{name}.{joint}",
+                                  f"expected a finite number of degrees, found {degrees!r}")
+            pose[joint] = float(degrees)
+        poses[name] = pose
+    return poses
+
+
+def check_pose(
+    pose: dict[str, float], name: str, servos: ServoSettings, source: str
+) -> None:
+    """Refuse a pose with an unknown joint or one outside its safe range, naming both."""
+    joints = {joint.name: joint for joint in servos.joints}
+    for joint_name, degrees in pose.items():
+        joint = joints.get(joint_name)
+        if joint is None:
+            known = ", ".join(joints) or "none configured"
+            raise ConfigError(source, f"{name}.{joint_name}",
+                              f"not a configured joint (joints: {known})")
+        low, high = joint.range_deg
+        if not low <= degrees <= high:
+            raise ConfigError(
+                source, f"{name}.{joint_name}",
+                f"pose {name!r} puts joint {joint_name!r} at {degrees} deg, outside its "
+                f"safe range [{low}, {high}]",
+            )
+
+
+def apply_poses_file(config: Config, config_source: str) -> Config:
+    """The configuration with the poses file's poses in the game and the joints' rest.
+
+    Every pose is checked against the joints' ranges. "happy" and "sad" become
+    game.happy_pose and game.sad_pose, a pose named like a pilot location
+    game.poses[location], and "rest" the rest_deg of the joints it names. A pose
+    also written inline in [game] is refused, as is a pilot whose locations are
+    only partly posed. Errors name the poses file, the pose and the joint.
+    """
+    assert config.poses_file is not None
+    source = config.poses_file
+    poses = read_poses(source)
+    for name, pose in poses.items():
+        check_pose(pose, name, config.servos, source)
+    game = config.game
+    changes: dict[str, Any] = {}
+    for name, field in ((HAPPY_POSE, "happy_pose"), (SAD_POSE, "sad_pose")):
+        if name in poses:
+            if getattr(game, field):
+                raise ConfigError(config_source, f"game.{field}",
+                                  f"also given as pose {name!r} in {source}: keep one")
+            changes[field] = poses[name]
+    located = {location: poses[location] for location in game.locations if location in poses}
+    if located:
+        if game.poses:
+            raise ConfigError(config_source, "game.poses",
+                              f"also given as poses in {source}: keep one")
+        missing = [location for location in game.locations if location not in located]
+        if missing:
+            raise ConfigError(source, "(poses)",
+                              f"no pose for pilot location {', '.join(map(repr, missing))}: "
+                              "record one per location, or none")
+        changes["poses"] = located
+    servos = config.servos
+    if REST_POSE in poses:
+        rest = poses[REST_POSE]
+        servos = msgspec.structs.replace(servos, joints=tuple(
+            msgspec.structs.replace(j, rest_deg=rest[j.name]) if j.name in rest else j
+            for j in servos.joints
+        ))
+    return msgspec.structs.replace(
+        config, game=msgspec.structs.replace(game, **changes), servos=servos
+    )
 
 
 _PATH_SEGMENT = re.compile(r"\.([A-Za-z_][\w-]*)|\[(\d+|\.\.\.)\]")

@@ -1,4 +1,4 @@
-"""`kasparctl servos`: find servos on a bus, and read every configured joint."""
+"""`kasparctl servos`: find servos on a bus, read every configured joint, calibrate by hand."""
 
 from __future__ import annotations
 
@@ -10,10 +10,11 @@ from typing import Any
 
 from hal.clock import MonotonicClock
 from hal.errors import BusError
+from hal.servos.api import JointStatus
 from hal.servos.bus import SerialBus
 from hal.servos.drivers import DRIVERS
 from hal.servos.joints import Joints
-from hal.servos.settings import BAUD_RATES, model_named
+from hal.servos.settings import BAUD_RATES, JointSettings, model_named
 from hal.servos.sim import SimServos
 from kasparctl.config import ConfigError, load_config
 from kasparctl.log import configure_logging
@@ -49,10 +50,16 @@ def register(subparsers: Any) -> None:
     )
     scan.set_defaults(run=run_scan)
 
-    read = commands.add_parser("read", help="print every configured joint: degrees and status")
+    read = commands.add_parser(
+        "read", help="print every configured joint: degrees, temperature, voltage, error bits"
+    )
     read.add_argument("--config", required=True, help="kaspar.toml")
     read.add_argument("--json", action="store_true", help="print a JSON list, one object per joint")
     read.set_defaults(run=run_read)
+
+    from kasparctl.commands import calibrate
+
+    calibrate.register(commands)
 
 
 def parse_ids(text: str) -> list[int]:
@@ -125,8 +132,12 @@ def run_scan(arguments: argparse.Namespace) -> int:
 
 
 async def read_joints(config_path: str) -> list[dict[str, Any]]:
-    """Every configured joint's position, torque, temperature, voltage and fault."""
-    config = load_config(config_path)
+    """Every configured joint's position, torque, temperature, voltage, error bits and problems.
+
+    Moves nothing. On a HerkuleX bus it sets the servos' ACK policy and clears
+    packet error bits, as the driver always does (both reported).
+    """
+    config = load_config(config_path, poses=False)
     settings, clock = config.servos, MonotonicClock()
     joints = (
         Joints.from_settings(settings, clock)
@@ -139,22 +150,51 @@ async def read_joints(config_path: str) -> list[dict[str, Any]]:
     finally:
         await joints.close()
     by_name = {j.name: j for j in settings.joints}
-    return [
-        {
-            "joint": s.joint,
-            "bus": by_name[s.joint].bus,
-            "id": by_name[s.joint].id,
-            "position_deg": None if s.position_deg is None else round(s.position_deg, 1),
-            "temperature_c": s.temperature_c,
-            "voltage_v": None if s.voltage_v is None else round(s.voltage_v, 1),
-            "status": "ok" if s.fault is None else f"{s.fault.kind.value}: {s.fault.detail}",
-        }
-        for s in statuses
-    ]
+    return [status_row(s, by_name[s.joint]) for s in statuses]
+
+
+def status_row(status: JointStatus, joint: JointSettings) -> dict[str, Any]:
+    """One joint as `servos read --json` prints it; `status` is "ok" only when healthy."""
+    problems = list(status.problems)
+    if status.fault is not None:
+        problems.insert(0, f"{status.fault.kind.value}: {status.fault.detail}")
+    if status.flags:
+        problems.append("error bits: " + ", ".join(status.flags))
+    return {
+        "joint": status.joint,
+        "bus": joint.bus,
+        "id": joint.id,
+        "model": joint.model,
+        "position_deg": None if status.position_deg is None else round(status.position_deg, 1),
+        "raw_position": status.raw_position,
+        "temperature_c": None if status.temperature_c is None else round(status.temperature_c, 1),
+        "voltage_v": None if status.voltage_v is None else round(status.voltage_v, 1),
+        "flags": list(status.flags),
+        "problems": problems,
+        "status": "ok" if status.healthy else "; ".join(problems),
+    }
+
+
+def format_row(row: dict[str, Any]) -> str:
+    """One joint as a line of text: a reading the servo cannot give is marked with '!'."""
+    impossible = " ".join(row["problems"])
+    position = "   --  " if row["position_deg"] is None else f"{row['position_deg']:7.1f}"
+    if row["raw_position"] is not None and "position reading" in impossible:
+        position = f"!{row['raw_position']:>6}"
+    temperature = "" if row["temperature_c"] is None else f"{row['temperature_c']:.0f} C"
+    if temperature and "temperature" in impossible:
+        temperature = "!" + temperature
+    voltage = "" if row["voltage_v"] is None else f"{row['voltage_v']:.1f} V"
+    if voltage and "voltage" in impossible:
+        voltage = "!" + voltage
+    return (
+        f"{row['joint']:<20} {row['bus']:<6} id {row['id']:3d} {position} deg "
+        f"{temperature:>6} {voltage:>7}  {row['status']}"
+    )
 
 
 def run_read(arguments: argparse.Namespace) -> int:
-    """Print every configured joint as it is now; exit 1 if any is faulty."""
+    """Print every configured joint as it is now; exit 1 if any is faulty or impossible."""
     _quiet_logging()
     try:
         rows = asyncio.run(read_joints(arguments.config))
@@ -165,10 +205,5 @@ def run_read(arguments: argparse.Namespace) -> int:
         print(json.dumps(rows))
     else:
         for row in rows:
-            position = "   --  " if row["position_deg"] is None else f"{row['position_deg']:7.1f}"
-            temperature = "" if row["temperature_c"] is None else f"{row['temperature_c']:.0f} C"
-            print(
-                f"{row['joint']:<16} {row['bus']:<8} id {row['id']:3d} {position} deg "
-                f"{temperature:>5}  {row['status']}"
-            )
+            print(format_row(row))
     return 0 if all(row["status"] == "ok" for row in rows) else 1
