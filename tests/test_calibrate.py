@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import tomllib
 
@@ -96,7 +97,7 @@ def test_a_joint_moved_by_hand_on_the_emulated_bus_is_calibrated_while_the_rest_
 
     def hand(now: float) -> float:
         t = now - begin
-        for (t0, r0), (t1, r1) in zip(marks, marks[1:], strict=False):
+        for (t0, r0), (t1, r1) in itertools.pairwise(marks):
             if t <= t1:
                 return r0 + (r1 - r0) * max(0.0, t - t0) / (t1 - t0)
         return marks[-1][1]

@@ -106,6 +106,7 @@ def test_read_prints_every_joint_in_degrees_and_names_the_silent_one(tmp_path, c
     rows = {row["joint"]: row for row in json.loads(capsys.readouterr().out)}
     assert code == 1
     assert rows["left_elbow"]["position_deg"] == 0.0 and rows["left_elbow"]["status"] == "ok"
+    assert rows["left_elbow"]["temperature_c"] == 32.0 and rows["left_elbow"]["voltage_v"] == 12.0
     assert rows["torso_yaw"]["position_deg"] is None
     assert rows["torso_yaw"]["status"].startswith("silent")
 
@@ -116,7 +117,7 @@ def test_read_works_on_the_simulated_servos(tmp_path, capsys):
                     (tmp_path / "kaspar.toml").read_text().replace('"real"', '"sim"'))
     assert main(["servos", "read", "--config", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "left_elbow" in out and "torso_yaw" in out and out.count("0.0 deg  35 C  ok") == 2
+    assert "left_elbow" in out and "torso_yaw" in out and out.count("0.0 deg   35 C  12.0 V  ok") == 2
 
 
 def test_check_names_each_missing_servo(tmp_path, capsys, monkeypatch):
@@ -126,13 +127,101 @@ def test_check_names_each_missing_servo(tmp_path, capsys, monkeypatch):
     assert code == 1
     assert "servos         FAIL  servo torso_yaw is missing (bus body on" in captured.out
     assert "id 2" in captured.out
-    assert "left_elbow" not in captured.out
+    assert "servos         ok    left_elbow: 0.0 deg, 32 C, 12.0 V" in captured.out
 
 
 def test_check_passes_when_every_servo_answers(tmp_path, capsys):
     with Dynamixel1Emulator(tmp_path / "ttyAX", ids=[1, 2]) as emulator:
         code = main(["check", "--config", real_config(tmp_path, emulator.path)])
-    assert code == 0 and "all 2 servos answered" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert code == 0 and "all 2 servos answered" in out
+    assert "servos         ok    left_elbow: 0.0 deg, 32 C, 12.0 V" in out
+    assert "servos         ok    torso_yaw: 10.0 deg, 32 C, 12.0 V" in out
+
+
+def test_check_fails_on_an_impossible_reading_and_on_latched_error_bits(tmp_path, capsys):
+    from hal.servos import dynamixel1 as dx1
+
+    with Dynamixel1Emulator(tmp_path / "ttyAX", ids=[1, 2]) as emulator:
+        emulator.set_present(1, 7990)
+        emulator.faults.error_bits[2] = int(dx1.ErrorBits.ANGLE_LIMIT)
+        code = main(["check", "--config", real_config(tmp_path, emulator.path)])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "servos         FAIL  left_elbow: 32 C, 12.0 V - position reading 7990 is impossible" in out
+    assert "torso_yaw: 10.0 deg, 32 C, 12.0 V - error bits ANGLE_LIMIT" in out
+
+
+def herkulex_config(tmp_path, port) -> str:
+    path = tmp_path / "kaspar.toml"
+    path.write_text(f"""
+[keyfob]
+backend = "sim"
+[voice]
+backend = "sim"
+[servos]
+backend = "real"
+max_temperature_c = 60.0
+[[servos.buses]]
+name = "body"
+port = "{port}"
+protocol = "herkulex"
+baud = 115200
+timeout_margin_ms = 100.0
+[[servos.joints]]
+name = "head_yaw"
+bus = "body"
+id = 2
+model = "drs-0101"
+range_deg = [-60.0, 60.0]
+[[servos.joints]]
+name = "smile"
+bus = "body"
+id = 6
+model = "drs-0201"
+range_deg = [-20.0, 20.0]
+""")
+    return str(path)
+
+
+def test_read_of_real_herkulex_servos_masks_the_high_bits_and_reports_temperature(tmp_path, capsys):
+    with HerkulexEmulator(tmp_path / "ttyHX", ids=[2, 6], models={6: "drs-0201"}, ack_policy=0,
+                          positions={2: 543, 6: 520}) as emulator:  # 543: as captured
+        code = main(["servos", "read", "--config", herkulex_config(tmp_path, emulator.path),
+                     "--json"])
+    rows = {row["joint"]: row for row in json.loads(capsys.readouterr().out)}
+    assert code == 0
+    assert rows["head_yaw"]["position_deg"] == pytest.approx(10.1, abs=0.05)
+    assert rows["smile"]["position_deg"] == pytest.approx(2.6, abs=0.05)
+    assert rows["head_yaw"]["raw_position"] == 543 and rows["smile"]["status"] == "ok"
+    assert rows["head_yaw"]["temperature_c"] == pytest.approx(26.0, abs=0.6)
+    assert rows["head_yaw"]["voltage_v"] == pytest.approx(7.5, abs=0.1)
+
+
+def test_read_fails_naming_a_hot_servo_and_a_latched_error(tmp_path, capsys):
+    from hal.servos import herkulex as hx
+
+    with HerkulexEmulator(tmp_path / "ttyHX", ids=[2, 6], models={6: "drs-0201"},
+                          positions={6: 520}) as emulator:
+        emulator.set_temperature(2, 62.0)
+        emulator.latch(6, int(hx.StatusError.OVERLOAD))
+        code = main(["servos", "read", "--config", herkulex_config(tmp_path, emulator.path)])
+    out = capsys.readouterr().out
+    assert code == 1
+    (yaw,) = [line for line in out.splitlines() if line.startswith("head_yaw")]
+    assert "62 C" in yaw and "too hot: 62 C >= max_temperature_c 60 C" in yaw
+    (smile,) = [line for line in out.splitlines() if line.startswith("smile")]
+    assert "overload: OVERLOAD" in smile and "error bits: OVERLOAD" in smile
+
+
+def test_read_marks_an_impossible_position_and_exits_non_zero(tmp_path, capsys):
+    with Dynamixel1Emulator(tmp_path / "ttyAX", ids=[1, 2]) as emulator:
+        emulator.set_present(2, 7990)
+        code = main(["servos", "read", "--config", real_config(tmp_path, emulator.path)])
+    out = capsys.readouterr().out
+    (torso,) = [line for line in out.splitlines() if line.startswith("torso_yaw")]
+    assert code == 1 and "!  7990 deg" in torso
+    assert "position reading 7990 is impossible for a ax-12a (it reports 0 to 1023)" in torso
 
 
 def test_check_does_not_touch_servos_with_the_sim_backend(tmp_path, capsys):

@@ -1,8 +1,9 @@
 """`kasparctl check`: is this robot ready for a session? A table, and an exit code.
 
-Validates the configuration and phrases, pings every configured servo (nothing
-is written, so a powered robot does not move), finds the keyfob, and speaks a
-test line. Usable over ssh by an engineer; exit 1 when anything is wrong.
+Validates the configuration and phrases, pings and reads every configured servo
+(its temperature, voltage, error bits; an impossible reading fails; nothing
+moves on a powered robot), finds the keyfob, and speaks a test line. Usable
+over ssh by an engineer; exit 1 when anything is wrong.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from hal.clock import MonotonicClock
+from hal.servos.api import JointStatus
 from hal.servos.joints import Joints
 from hal.servos.settings import ServoSettings
 from kasparctl.config import Config, ConfigError, default_config_path, load_config
@@ -76,33 +78,61 @@ async def _servos(config: Config, speak: bool) -> list[Result]:
         return [Result("servos", True, "simulated (servos.backend = 'sim')")]
     if not config.servos.joints:
         return [Result("servos", False, "no joints configured in [servos]")]
-    problems = await _missing_servos(config.servos)
-    if problems:
-        return [Result("servos", False, problem) for problem in problems]
-    return [Result("servos", True, f"all {len(config.servos.joints)} servos answered")]
-
-
-async def _missing_servos(settings: ServoSettings) -> list[str]:
-    joints = Joints.from_settings(settings, MonotonicClock())
-    # Only pings: nothing is written, so checking a powered robot does not move it.
-    await joints.start(poll=False, read=False)
-    try:
-        found = await joints.ping_all()
-    finally:
-        await joints.close()
-    problems = []
-    for joint in settings.joints:
-        bus = settings.bus(joint.bus)
+    found, statuses = await _inspect_servos(config.servos)
+    results = []
+    answered = 0
+    for joint in config.servos.joints:
+        bus = config.servos.bus(joint.bus)
         where = f"bus {bus.name} on {bus.port}, id {joint.id}"
         model_number = found[joint.name]
         expected = joint.servo.model_number
         if model_number is None:
-            problems.append(f"servo {joint.name} is missing ({where})")
-        elif expected is not None and model_number != expected:
-            problems.append(
-                f"servo {joint.name} is not a {joint.model} (model number {model_number}, {where})"
-            )
-    return problems
+            results.append(Result("servos", False, f"servo {joint.name} is missing ({where})"))
+            continue
+        answered += 1
+        if expected is not None and model_number != expected:
+            results.append(Result(
+                "servos", False,
+                f"servo {joint.name} is not a {joint.model} (model number {model_number}, {where})",
+            ))
+            continue
+        results.append(_servo_row(statuses[joint.name]))
+    if answered == len(config.servos.joints):
+        results.insert(0, Result("servos", True, f"all {answered} servos answered"))
+    return results
+
+
+async def _inspect_servos(settings: ServoSettings) -> tuple[dict[str, int | None], dict[str, Any]]:
+    joints = Joints.from_settings(settings, MonotonicClock())
+    # Pings and reads only: nothing moves. (A HerkuleX bus gets its ACK policy set, and
+    # packet error bits are cleared once reported.)
+    await joints.start(poll=False, read=False)
+    try:
+        found = await joints.ping_all()
+        statuses = {s.joint: s for s in await joints.survey()}
+    finally:
+        await joints.close()
+    return found, statuses
+
+
+def _servo_row(status: JointStatus) -> Result:
+    """One servo: where it is, how hot, its supply, and what is wrong (error bits, impossible)."""
+    readings = []
+    if status.position_deg is not None:
+        readings.append(f"{status.position_deg:.1f} deg")
+    if status.temperature_c is not None:
+        readings.append(f"{status.temperature_c:.0f} C")
+    if status.voltage_v is not None:
+        readings.append(f"{status.voltage_v:.1f} V")
+    wrong = list(status.problems)
+    if status.fault is not None:
+        wrong.insert(0, f"{status.fault.kind.value}: {status.fault.detail}")
+    if status.flags:
+        wrong.append("error bits " + ", ".join(status.flags))
+    detail = f"{status.joint}: {', '.join(readings) or 'no readings'}"
+    if wrong:
+        detail += " - " + "; ".join(wrong)
+    return Result("servos", status.healthy, detail)
 
 
 async def _keyfob(config: Config, speak: bool) -> list[Result]:
