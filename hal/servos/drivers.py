@@ -48,7 +48,10 @@ class BusDriver(abc.ABC):
 
     async def _each(self, ids: Sequence[int], exchanges: list[Exchange]) -> list[Any]:
         """Run one exchange per servo; the first that failed is named as silent."""
-        outcomes = await self.bus.exchange_all(exchanges)
+        return self._named(ids, await self.bus.exchange_all(exchanges))
+
+    def _named(self, ids: Sequence[int], outcomes: list[Any]) -> list[Any]:
+        """The outcomes, if all succeeded; else the first failure, naming its servo."""
         for servo_id, outcome in zip(ids, outcomes, strict=True):
             if isinstance(outcome, PortUnavailable):
                 raise outcome
@@ -354,20 +357,32 @@ class HerkulexDriver(BusDriver):
     async def _read(
         self, servo_id: int, address: int, length: int, eep: bool = False
     ) -> hx.Ack:
-        """One RAM_READ (or EEP_READ); a silent servo gets the ACK policy again and one more try.
+        """One RAM_READ (or EEP_READ); if nothing at all answers, the ACK policy once more.
 
-        A servo left at policy 0 answers no read at all: without this it would
-        look missing although it is there (it still answers STAT).
+        A servo left at policy 0 (or power-cycled back to it) answers no read, yet
+        is there (it answers STAT); a servo that answers garbage is not helped by
+        it, so a corrupt reply is never given that second chance.
         """
         command = hx.Command.EEP_READ if eep else hx.Command.RAM_READ
         build = hx.eep_read if eep else hx.ram_read
-        decode = self._value(servo_id, command, address, length)
+        exchange = Exchange(build(servo_id, address, length), 1, self.framing,
+                            self._value(servo_id, command, address, length), 11 + length)
         await self._configure()
-        try:
-            return await self._ask(servo_id, build(servo_id, address, length), decode, 11 + length)
-        except ServoSilent:
+        (outcome,) = await self._reasserted([exchange])
+        (reply,) = self._named([servo_id], [outcome])
+        assert isinstance(reply, hx.Ack)
+        return reply
+
+    async def _reasserted(self, exchanges: list[Exchange]) -> list[Any]:
+        """Run the exchanges; those that got no answer at all run again after the ACK policy."""
+        outcomes = await self.bus.exchange_all(exchanges)
+        unanswered = [k for k, outcome in enumerate(outcomes) if isinstance(outcome, BusTimeout)]
+        if unanswered:
             await self._send_ack_policy()
-            return await self._ask(servo_id, build(servo_id, address, length), decode, 11 + length)
+            again = await self.bus.exchange_all([exchanges[k] for k in unanswered])
+            for k, outcome in zip(unanswered, again, strict=True):
+                outcomes[k] = outcome
+        return outcomes
 
     async def ping(self, servo_id: int) -> int | None:
         """STAT (answered at every ACK policy), then the model number; None when silent.
@@ -394,12 +409,8 @@ class HerkulexDriver(BusDriver):
                      self._value(i, hx.Command.RAM_READ, address, 2), 13)
             for i in ids
         ]
-        try:
-            outcomes = await self._each(ids, exchanges)
-        except ServoSilent:
-            # Perhaps left at ACK policy 0 (or power-cycled): tell every servo again, once.
-            await self._send_ack_policy()
-            outcomes = await self._each(ids, exchanges)
+        # A servo left at ACK policy 0 (or power-cycled) answers no read: told again, once.
+        outcomes = self._named(ids, await self._reasserted(exchanges))
         return {
             i: hx.position(reply.read_value()[1])
             for i, reply in zip(ids, outcomes, strict=True)

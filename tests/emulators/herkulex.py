@@ -187,7 +187,8 @@ class HerkulexEmulator(Emulator):
         for servo in self.servos.values():
             if servo.torque_on:
                 moving = abs(servo.axis.goal - servo.axis.present) > INPOSITION_MARGIN
-                servo.temperature_c += elapsed * self.heat_c_per_s * (servo.load + 0.2 * moving)
+                # Moving without a load warms a servo only a little; holding a load, much more.
+                servo.temperature_c += elapsed * self.heat_c_per_s * (servo.load + 0.05 * moving)
             servo.temperature_c = max(
                 AMBIENT_C, servo.temperature_c - elapsed * self.cool_c_per_s * (not servo.load)
             )
