@@ -27,8 +27,9 @@ import msgspec  # noqa: E402
 from hal.clock import MonotonicClock  # noqa: E402
 from hal.servos import dynamixel1 as dx1  # noqa: E402
 from hal.servos import dynamixel2 as dx2  # noqa: E402
+from hal.servos import herkulex as hx  # noqa: E402
 from hal.servos.bus import SerialBus, wire_time  # noqa: E402
-from hal.servos.drivers import Dynamixel1Driver, Dynamixel2Driver  # noqa: E402
+from hal.servos.drivers import Dynamixel1Driver, Dynamixel2Driver, HerkulexDriver  # noqa: E402
 from hal.servos.joints import Joints  # noqa: E402
 from hal.servos.settings import ServoSettings  # noqa: E402
 
@@ -41,13 +42,18 @@ TARGET_IDLE_CPU_PERCENT = 0.5
 READ_ROUNDS = 200
 
 
-def start_emulator(kind: str, path: Path) -> subprocess.Popen[str]:
+HERKULEX_BAUD = 115200  # Kaspar 3's body bus
+HERKULEX_IDS = list(range(1, 17))
+
+
+def start_emulator(kind: str, path: Path, module: str = "dynamixel",
+                   ids: list[int] = IDS) -> subprocess.Popen[str]:
     script = f"""
 import sys
 sys.path[:0] = [{str(ROOT)!r}, {str(ROOT / "tests")!r}]
 from pathlib import Path
-from emulators.dynamixel import {kind}
-emulator = {kind}(Path({str(path)!r}), ids=list(range(1, 18)), rate=1e6)
+from emulators.{module} import {kind}
+emulator = {kind}(Path({str(path)!r}), ids={ids!r}, rate=1e6)
 print("ready", flush=True)
 sys.stdin.read()
 emulator.stop()
@@ -134,12 +140,12 @@ async def bare_loop_jitter(steps: int) -> float:
     return deviations[int(0.99 * (len(deviations) - 1))]
 
 
-async def read_all(driver, rounds: int) -> tuple[float, float]:  # type: ignore[no-untyped-def]
-    await driver.read_positions(IDS)  # warm up
+async def read_all(driver, rounds: int, ids: list[int] = IDS) -> tuple[float, float]:  # type: ignore[no-untyped-def]
+    await driver.read_positions(ids)  # warm up
     wall, cpu = time.perf_counter(), time.process_time()
     for _ in range(rounds):
-        positions = await driver.read_positions(IDS)
-        assert len(positions) == len(IDS)
+        positions = await driver.read_positions(ids)
+        assert len(positions) == len(ids)
     return (time.perf_counter() - wall) / rounds, (time.process_time() - cpu) / rounds
 
 
@@ -192,6 +198,22 @@ async def reads(path1: Path, path2: Path) -> None:
         row("  dynamixel-sdk CPU time", f"{theirs_cpu * 1e3:.2f} ms", "", None)
 
 
+async def herkulex_reads(path: Path) -> None:
+    """16 DRS-0101 at 115200 baud (Kaspar 3): one RAM_READ each, handed over at once."""
+    per_servo = len(hx.ram_read(1, hx.Ram.CALIBRATED_POSITION, 2)) + 13
+    limit = len(HERKULEX_IDS) * wire_time(per_servo, HERKULEX_BAUD)
+    driver = HerkulexDriver(SerialBus("bench", str(path), HERKULEX_BAUD, timeout_margin=0.005))
+    await driver.start()
+    wall, cpu = await read_all(driver, READ_ROUNDS // 4, HERKULEX_IDS)
+    await driver.close()
+    print(f"reading all 16 positions of Kaspar 3's HerkuleX bus at {HERKULEX_BAUD} baud "
+          f"({READ_ROUNDS // 4} rounds)")
+    row("wire-time limit (16 RAM_READs and replies)", f"{limit * 1e3:.2f} ms", "", None)
+    row("kasparctl wall time (pty: our overhead only)", f"{wall * 1e3:.2f} ms",
+        f"< {TARGET_READ_RATIO:.0f}x limit", wall < TARGET_READ_RATIO * limit)
+    row("kasparctl CPU time", f"{cpu * 1e3:.2f} ms", "", None)
+
+
 async def idle_cpu(path: Path) -> None:
     bus = make_bus(path)
     await bus.start()
@@ -209,8 +231,10 @@ async def idle_cpu(path: Path) -> None:
 async def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         path1, path2 = Path(tmp) / "ttyAX", Path(tmp) / "ttyXL"
+        path3 = Path(tmp) / "ttyHX"
         emulators = [start_emulator("Dynamixel1Emulator", path1),
-                     start_emulator("Dynamixel2Emulator", path2)]
+                     start_emulator("Dynamixel2Emulator", path2),
+                     start_emulator("HerkulexEmulator", path3, "herkulex", HERKULEX_IDS)]
         try:
             print(f"kasparctl servo bench: 17 emulated servos at {BAUD} baud on a pty\n")
             bytes_per_step()
@@ -218,6 +242,8 @@ async def main() -> None:
             await control_jitter(path1)
             print()
             await reads(path1, path2)
+            print()
+            await herkulex_reads(path3)
             print()
             await idle_cpu(path1)
         finally:

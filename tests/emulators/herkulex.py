@@ -71,6 +71,7 @@ class Servo:
         self.temperature_c = AMBIENT_C + servo_id % 4
         self.load = 0.0  # fraction of stall torque the servo holds (a test sets it)
         self.hand: Callable[[float], float] | None = None
+        self.heat_stamp: float | None = None  # emulator clock time of the last heat update
         self.latched = 0  # status error bits, until written back to zero
         self.detail = 0  # latched invalid-packet detail bits
 
@@ -110,7 +111,6 @@ class HerkulexEmulator(Emulator):
         self.position_flags = position_flags
         self.heat_c_per_s = heat_c_per_s
         self.cool_c_per_s = cool_c_per_s
-        self._temperature_stamp: float | None = None
         super().__init__(path, clock)
 
     # The attributes older tests and the soak read.
@@ -181,26 +181,25 @@ class HerkulexEmulator(Emulator):
         if servo.latched & servo.torque_policy:
             servo.ram[hx.Ram.TORQUE_CONTROL] = hx.TorqueControl.FREE
 
-    def _heat(self, now: float) -> None:
-        elapsed = 0.0 if self._temperature_stamp is None else now - self._temperature_stamp
-        self._temperature_stamp = now
-        for servo in self.servos.values():
-            if servo.torque_on:
-                moving = abs(servo.axis.goal - servo.axis.present) > INPOSITION_MARGIN
-                # Moving without a load warms a servo only a little; holding a load, much more.
-                servo.temperature_c += elapsed * self.heat_c_per_s * (servo.load + 0.05 * moving)
-            servo.temperature_c = max(
-                AMBIENT_C, servo.temperature_c - elapsed * self.cool_c_per_s * (not servo.load)
-            )
-            raw = hx.raw_temperature(servo.temperature_c)
-            servo.ram[hx.Ram.TEMPERATURE] = raw
-            if raw >= servo.ram[hx.Ram.MAX_TEMPERATURE]:
-                self._latch(servo, hx.StatusError.EXCEED_TEMPERATURE)
+    def _heat(self, servo: Servo, now: float) -> None:
+        elapsed = 0.0 if servo.heat_stamp is None else now - servo.heat_stamp
+        servo.heat_stamp = now
+        if servo.torque_on:
+            moving = abs(servo.axis.goal - servo.axis.present) > INPOSITION_MARGIN
+            # Moving without a load warms a servo only a little; holding a load, much more.
+            servo.temperature_c += elapsed * self.heat_c_per_s * (servo.load + 0.05 * moving)
+        servo.temperature_c = max(
+            AMBIENT_C, servo.temperature_c - elapsed * self.cool_c_per_s * (not servo.load)
+        )
+        raw = hx.raw_temperature(servo.temperature_c)
+        servo.ram[hx.Ram.TEMPERATURE] = raw
+        if raw >= servo.ram[hx.Ram.MAX_TEMPERATURE]:
+            self._latch(servo, hx.StatusError.EXCEED_TEMPERATURE)
 
     def _refresh(self, servo_id: int) -> None:
         now = self.clock()
-        self._heat(now)
         servo = self.servos[servo_id]
+        self._heat(servo, now)
         injected = self.faults.error_bits.get(servo_id, 0)
         if injected & ~servo.latched:
             self._latch(servo, injected)
@@ -299,7 +298,7 @@ class HerkulexEmulator(Emulator):
             fresh = Servo(servo_id, "drs-0101", round(servo.axis.present), servo.axis.rate)
             fresh.eep[:] = servo.eep
             fresh.ram[0:48] = servo.eep[hx.Eep.ID : hx.Eep.ID + 48]
-            fresh.temperature_c = servo.temperature_c
+            fresh.temperature_c, fresh.heat_stamp = servo.temperature_c, servo.heat_stamp
             self.servos[servo_id] = fresh
             self.faults.error_bits.pop(servo_id, None)
             return None
