@@ -179,3 +179,20 @@ async def test_protocol2_reset_reboots_the_servo_and_clears_its_hardware_error(x
         assert (await driver.read_health(2)).kind is None
     finally:
         await driver.close()
+
+
+async def test_an_ax12_at_status_return_level_0_is_named_not_missing(tmp_path):
+    from emulators.dynamixel import Dynamixel1Emulator
+    from servo_fixtures import make_driver
+
+    from hal.servos import dynamixel1 as dx1
+
+    with Dynamixel1Emulator(tmp_path / "ttyAX", ids=[1]) as emulator:
+        emulator.tables[1][dx1.AX12.STATUS_RETURN_LEVEL] = 0  # answers PING only
+        driver = make_driver("dynamixel1", emulator.path, retries=0)
+        await driver.start()
+        try:
+            assert await driver.ping(1) == 0
+            assert await driver.ping(2) is None
+        finally:
+            await driver.close()

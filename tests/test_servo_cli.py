@@ -229,3 +229,13 @@ def test_check_does_not_touch_servos_with_the_sim_backend(tmp_path, capsys):
     path.write_text("[servos]\nbackend = 'sim'\n[keyfob]\nbackend = 'sim'\n[voice]\nbackend = 'sim'\n")
     assert main(["check", "--config", str(path)]) == 0
     assert "servos answered" not in capsys.readouterr().out
+
+
+def test_check_names_a_servo_that_answers_pings_but_no_reads(tmp_path, capsys):
+    from hal.servos import dynamixel1 as dx1
+
+    with Dynamixel1Emulator(tmp_path / "ttyAX", ids=[1, 2]) as emulator:
+        emulator.tables[2][dx1.AX12.STATUS_RETURN_LEVEL] = 0
+        code = main(["check", "--config", real_config(tmp_path, emulator.path)])
+    out = capsys.readouterr().out
+    assert code == 1 and "servo torso_yaw answers a ping but no read" in out

@@ -131,12 +131,19 @@ class Dynamixel1Driver(BusDriver):
         return await self._ask(servo_id, request, self._status(servo_id, length), 6 + length)
 
     async def ping(self, servo_id: int) -> int | None:
-        """PING, then READ of the model number; None when either goes unanswered."""
+        """PING, then READ of the model number; None when the PING goes unanswered.
+
+        0 for a servo that answers its PING but not the read: at status return level
+        0 (EEPROM 16) an AX-12A answers nothing else, so every read would time out.
+        """
         try:
             await self._ask(servo_id, dx1.ping(servo_id), self._status(servo_id, 0), 6)
-            status = await self._read(servo_id, dx1.AX12.MODEL_NUMBER, 2)
         except ServoSilent:
             return None
+        try:
+            status = await self._read(servo_id, dx1.AX12.MODEL_NUMBER, 2)
+        except ServoSilent:
+            return 0
         return dx1.u16(status.params)
 
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:

@@ -90,6 +90,13 @@ async def _servos(config: Config, speak: bool) -> list[Result]:
             results.append(Result("servos", False, f"servo {joint.name} is missing ({where})"))
             continue
         answered += 1
+        if expected is not None and model_number == 0:
+            results.append(Result(
+                "servos", False,
+                f"servo {joint.name} answers a ping but no read ({where}): its status return "
+                "level (Dynamixel) or ACK policy (HerkuleX) does not let it answer reads",
+            ))
+            continue
         if expected is not None and model_number != expected:
             results.append(Result(
                 "servos", False,
