@@ -1,4 +1,5 @@
-"""Servo bus benchmarks: 17 emulated servos at 1,000,000 baud, each figure beside its target.
+"""Servo bus benchmarks: 17 emulated Dynamixels at 1,000,000 baud and Kaspar 3's 16 HerkuleX at
+115200, each figure beside its target.
 
 The emulator runs in its own process on a pty, so the CPU figures are ours
 alone. A pty does not pace bytes at the baud rate: the "wire-time limit" is

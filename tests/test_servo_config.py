@@ -59,6 +59,13 @@ def test_kaspar_3_example_has_a_herkulex_body_and_maestro_eyes():
     assert len(eyes) == 6 and {j.model for j in eyes} == {"hs-82mg"}
 
 
+@pytest.mark.parametrize("robot", ["kaspar-1c", "kaspar-3"])
+def test_the_example_robots_poses_are_inside_their_ranges_and_make_the_faces(robot):
+    config = load_config(SYSTEMD / f"{robot}.toml")
+    assert config.poses_file == str(SYSTEMD / f"{robot}-poses.toml")
+    assert config.game.happy_pose["smile"] > 0 > config.game.sad_pose["smile"]
+
+
 def test_defaults_are_the_simulation_with_no_joints():
     servos = parse_config("", "kaspar.toml").servos
     assert servos.backend == "sim" and servos.joints == () and servos.safe_action == "hold"
