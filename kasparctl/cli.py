@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     "sessions",
     "export",
     "report",
+    "watch",
 )
 
 
