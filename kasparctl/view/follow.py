@@ -30,6 +30,7 @@ from kasparctl.game.session import (
     read_json_lines,
     read_records,
 )
+from kasparctl.view.fold import daemon_events, session_view
 from kasparctl.view.inotify import (
     IN_CREATE,
     IN_DELETE,
@@ -43,7 +44,7 @@ from kasparctl.view.inotify import (
     Event,
     Inotify,
 )
-from kasparctl.view.model import DaemonEvent, SessionView, WatchView, daemon_events, session_view
+from kasparctl.view.model import DaemonEvent, SessionView, WatchView
 
 # The daemon's own log of events outside a session (faults at start-up among them).
 EVENTS_FILE = "events.jsonl"

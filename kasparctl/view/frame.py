@@ -13,11 +13,11 @@ at the bottom first, a wider one gets longer bars.
 from __future__ import annotations
 
 import datetime as dt
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
+from kasparctl.view.ages import ago, clock_time, next_change
 from kasparctl.view.model import (
     Answer,
     CommandSeen,
@@ -86,52 +86,6 @@ STEP_HELP = {
 def plain_text(line: Line) -> str:
     """A line without its styles."""
     return "".join(text for text, _ in line)
-
-
-def parse_time(text: str | None) -> dt.datetime | None:
-    """A record's time (ISO 8601; UTC when it names no zone); None if it is not one."""
-    if not text:
-        return None
-    try:
-        when = dt.datetime.fromisoformat(text)
-    except ValueError:
-        return None
-    return when if when.tzinfo is not None else when.replace(tzinfo=dt.UTC)
-
-
-def ago(then: str | None, now: dt.datetime) -> str:
-    """How long ago `then` (UTC ISO 8601) was, in words a glance reads: "12 s ago"."""
-    when = parse_time(then)
-    if when is None:
-        return "?"
-    seconds = (now - when).total_seconds()
-    if seconds < 1:
-        return "just now"
-    if seconds < 60:
-        return f"{int(seconds)} s ago"
-    if seconds < 3600:
-        return f"{int(seconds // 60)} min ago"
-    if seconds < 86400:
-        return f"{int(seconds // 3600)} h ago"
-    return f"{int(seconds // 86400)} d ago"
-
-
-def next_change(then: str | None, now: dt.datetime) -> float | None:
-    """Seconds until ago(then) reads differently; None if it never will (unknown time)."""
-    when = parse_time(then)
-    if when is None:
-        return None
-    seconds = max((now - when).total_seconds(), 0.0)
-    unit = (
-        1.0 if seconds < 60 else 60.0 if seconds < 3600 else 3600.0 if seconds < 86400 else 86400.0
-    )
-    return unit - math.fmod(seconds, unit)
-
-
-def clock_time(text: str | None) -> str:
-    """The local wall-clock time of a record, HH:MM:SS."""
-    when = parse_time(text)
-    return when.astimezone().strftime("%H:%M:%S") if when is not None else "--:--:--"
 
 
 def shown_times(view: WatchView) -> list[str]:

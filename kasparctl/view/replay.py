@@ -21,10 +21,12 @@ from pathlib import Path
 
 from kasparctl.game.records import AnyRecord
 from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, read_records
+from kasparctl.view.ages import parse_time
+from kasparctl.view.fold import SessionFold
 from kasparctl.view.follow import read_plan
-from kasparctl.view.frame import frame, parse_time
+from kasparctl.view.frame import frame
 from kasparctl.view.live import QUIT_KEYS, Waker
-from kasparctl.view.model import SessionFold, SessionView, WatchView
+from kasparctl.view.model import SessionView, WatchView
 from kasparctl.view.screen import Keys, Screen
 
 MAX_GAP_S = 5.0
