@@ -132,7 +132,7 @@ def _with_view(config: Config, options: DemoOptions, speed: float | None) -> Dem
                 lambda: run_demo(config, options, speed=speed),
                 screen,
                 keys,
-                lambda result: f"the demo is {result.final_state}: q quits.",
+                lambda result: f"the demo is {result.final_state}.",
             )
         finally:
             screen.close()

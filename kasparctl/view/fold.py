@@ -160,9 +160,17 @@ def _on_session(view: SessionView, record: SessionRecord) -> SessionView:
             resumes=view.resumes + 1,
             keyfob_lost=False,
             faults=_settled(view.faults),
+            question=_interrupted(view.question),
         )
     reason = record.reason if isinstance(record.reason, str) else "stopped"
-    return replace(view, shutdown=reason)
+    return replace(view, shutdown=reason, question=_interrupted(view.question))
+
+
+def _interrupted(question: Question | None) -> Question | None:
+    """An open question the daemon stopped in (or was killed in) no longer stands."""
+    if question is not None and question.open:
+        return replace(question, interrupted=True)
+    return question
 
 
 def _on_step(view: SessionView, record: StepRecord) -> SessionView:

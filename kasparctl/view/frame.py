@@ -186,10 +186,11 @@ def _header(view: WatchView, now: dt.datetime, width: int, glyphs: Glyphs) -> li
     step = step_number(session.step or "")
     if step is not None and session.stage != session.step:
         second.add(f"step {step} {session.step} {glyphs.dot} ", "dim")
-    second.add(f"trial {session.trials}")
+    second.add(f"{session.trials} trials")
     if session.undone:
         second.add(f" ({session.undone} undone)", "dim")
-    total = f" of {len(session.toys)}" if session.toys else ""
+    targets = _targets(session)
+    total = f" of {targets}" if targets else ""
     second.add(f"  {glyphs.dot}  learned {len(session.learned)}{total}")
     turn = session.whose_turn
     if turn:
@@ -202,6 +203,12 @@ def _header(view: WatchView, now: dt.datetime, width: int, glyphs: Glyphs) -> li
         row = _Row(width).add(f"FAULT {what}", "bad").add(f" {ago(fault.time, now)}", "dim")
         lines.append(row.add(f": {fault.detail}").line())
     return lines
+
+
+def _targets(session: SessionView) -> int | None:
+    """How many targets there are to learn, where the records tell: in the names game a
+    bag per toy; the pilot's locations are known only as they come up."""
+    return len(session.toys) if session.variant == "names" and session.toys else None
 
 
 def _daemon_row(view: WatchView, session: SessionView | None, now: dt.datetime, width: int) -> _Row:
@@ -243,9 +250,7 @@ def _robot_problems(view: WatchView, session: SessionView | None) -> list[str]:
 
 def _question_block(session: SessionView, height: int, width: int, glyphs: Glyphs) -> list[Line]:
     question = session.question
-    if question is None or (
-        session.stage not in ("guessing", "paused", "fault", "farewell", "finished", "stopped")
-    ):
+    if question is None:
         return _step_block(session, width)
     rows: list[Line] = [_question_title(session, question, width, glyphs).line()]
     offered = [bar for bar in question.bars if bar.offered]
@@ -286,6 +291,8 @@ def _question_title(session: SessionView, question: Question, width: int, glyphs
     row.add(f" {glyphs.dot} trial {question.trial} {glyphs.dot} ").add(question.child, "title")
     if question.undone:
         row.add("  answer undone", "warn")
+    elif question.interrupted:
+        row.add("  interrupted, to be asked again", "warn")
     elif question.open:
         asking = "asking" if session.stage == "guessing" else f"asked, {session.stage}"
         row.add(f"  {asking}", "warn" if session.stage != "guessing" else "")
@@ -355,7 +362,11 @@ def _step_block(session: SessionView, width: int) -> list[Line]:
     if stage in ("paused", "fault"):
         left = session.step or "idle"
         style: Style = "warn" if stage == "paused" else "bad"
-        text = f"The game is {stage} in {left}; the researcher's long red resumes it."
+        text = (
+            f"The game is paused in {left}; the researcher's long red resumes it."
+            if stage == "paused"
+            else f"Stopped by a fault in {left}; long red resumes once the hardware is back."
+        )
         return [_Row(width).add(text, style).line()]
     return [_Row(width).add(STEP_HELP.get(stage, stage)).line()]
 
@@ -456,7 +467,8 @@ def _lists(
     recent = session.answers[-rows_top:]
     widths = _answer_widths(recent)
     answers = [_answer_row(a, widths, left_width, glyphs).line() for a in recent]
-    learned_total = f" {len(session.learned)} of {len(session.toys)}" if session.toys else ""
+    targets = _targets(session)
+    learned_total = f" {len(session.learned)}" + (f" of {targets}" if targets else "")
     learned = [
         _Row(right_width)
         .add(f"{item.target} {glyphs.arrow} ")
@@ -517,9 +529,10 @@ def frame(
             body += [rule, *events]
     lines += body[:body_height]
     lines += [()] * (height - 1 - len(lines))
-    footer = _Row(width).add(view.footer, "dim")
+    footer = _Row(width)
     warnings = session.warnings if session is not None else ()
     if warnings:
-        footer.right(f"{len(warnings)} line(s) not read", "warn")
-    lines.append(footer.line())
+        # First: a line of the records not read is data the researcher may be missing.
+        footer.add(f"{len(warnings)} line(s) not read", "warn").add("  ")
+    lines.append(footer.add(view.footer, "dim").line())
     return lines[:height]

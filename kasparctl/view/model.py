@@ -46,11 +46,13 @@ class Question:
     prompts: int = 0  # times nobody answered and Kaspar prompted
     early_presses: int = 0  # presses before the question was finished
     undone: bool = False
+    # Left unanswered when the daemon stopped: a resumed game asks it again.
+    interrupted: bool = False
 
     @property
     def open(self) -> bool:
-        """Whether the children have yet to answer."""
-        return self.answer is None
+        """Whether the children have yet to answer (and the question still stands)."""
+        return self.answer is None and not self.interrupted
 
 
 @dataclass(frozen=True, slots=True)
