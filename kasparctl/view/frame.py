@@ -57,6 +57,7 @@ class Glyphs:
     eighths: str  # partial blocks, from one eighth to seven
     trough: str
     rule: str
+    separator: str  # between pictures printed one after another
     guess: str
     yes: str
     no: str
@@ -64,8 +65,8 @@ class Glyphs:
     dot: str
 
 
-UNICODE = Glyphs("█", "▏▎▍▌▋▊▉", "░", "─", "◀", "✓", "✗", "→", "·")
-ASCII = Glyphs("#", "", ".", "-", "<", "+", "x", "->", "|")
+UNICODE = Glyphs("█", "▏▎▍▌▋▊▉", "░", "─", "═", "◀", "✓", "✗", "→", "·")
+ASCII = Glyphs("#", "", ".", "-", "=", "<", "+", "x", "->", "|")
 
 STAGE_STYLE: dict[str, Style] = {
     "fault": "badge-bad",

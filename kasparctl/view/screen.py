@@ -87,7 +87,7 @@ class PlainScreen:
         if text == self._last:
             return
         self._last = text
-        self.out.write(f"{self.glyphs.rule * self._size[0]}\n{text}\n")
+        self.out.write(f"{self.glyphs.separator * self._size[0]}\n{text}\n")
         self.out.flush()
 
     def close(self) -> None:
