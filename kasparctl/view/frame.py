@@ -187,7 +187,7 @@ def _header(view: WatchView, now: dt.datetime, width: int, glyphs: Glyphs) -> li
     step = step_number(session.step or "")
     if step is not None and session.stage != session.step:
         second.add(f"step {step} {session.step} {glyphs.dot} ", "dim")
-    second.add(f"{session.trials} trials")
+    second.add(f"{session.trials} trial{'' if session.trials == 1 else 's'}")
     if session.undone:
         second.add(f" ({session.undone} undone)", "dim")
     targets = _targets(session)
@@ -281,7 +281,7 @@ def _question_block(session: SessionView, height: int, width: int, glyphs: Glyph
         names = ", ".join(
             f"{bar.toy} ({learned[bar.toy]})" if bar.toy in learned else bar.toy for bar in others
         )
-        rows.append(_Row(width).add(f"  not offered, learned: {names}", "dim").line())
+        rows.append(_Row(width).add(f"  no longer offered: {names}", "dim").line())
     rows.append(_entropy_row(session, question, width, glyphs).line())
     return rows
 
@@ -414,23 +414,20 @@ def _command_row(command: CommandSeen, width: int, glyphs: Glyphs) -> _Row:
 
 
 def _fault_row(fault: FaultSeen, now: dt.datetime, width: int) -> _Row:
-    row = _Row(width)
-    when = ago(fault.time, now)
+    """When, what and why; a pending one (the game waits for a resume) marked "now"."""
+    row = _Row(width).add(f"{ago(fault.time, now)} ", "dim")
     what = f"{fault.source} {fault.joint}" if fault.joint else fault.source
     row.add(what, "bad" if fault.pending else "warn")
-    row.add(f" {when}", "dim")
     if fault.pending:
-        row.add(" PENDING", "bad")
-    row.add(f": {fault.detail}")
-    return row
+        row.add(" (now)", "bad")
+    return row.add(f": {fault.detail}")
 
 
 def _daemon_event_row(event: DaemonEvent, now: dt.datetime, width: int) -> _Row:
-    row = _Row(width).add("daemon ", "dim").add(event.name, "bad" if event.fault else "")
-    row.add(f" {ago(event.time, now)}", "dim")
-    if event.detail:
-        row.add(f": {event.detail}")
-    return row
+    """An event of the daemon's own log, in the faults' form."""
+    row = _Row(width).add(f"{ago(event.time, now)} ", "dim").add("daemon ", "dim")
+    row.add(event.name, "bad" if event.fault else "")
+    return row.add(f": {event.detail}") if event.detail else row
 
 
 def _columns(left: list[Line], right: list[Line], width: int, split: int) -> list[Line]:
