@@ -212,3 +212,19 @@ def test_the_live_loop_draws_each_record_and_the_writer_leaving(tmp_path: Path) 
         if holder.poll() is None:
             holder.kill()
             holder.wait()
+
+
+def test_what_cannot_be_followed_is_said_not_taken_for_missing(tmp_path: Path) -> None:
+    not_a_directory = tmp_path / "state"
+    not_a_directory.write_text("")
+    with Inotify() as inotify:
+        view = Follower(not_a_directory, inotify).observe()
+        assert view.problem == f"{not_a_directory}: cannot watch: Not a directory"
+    session = start_session(tmp_path / "other")
+    session.close()
+    records = session.directory / RECORDS_FILE
+    records.unlink()
+    records.mkdir()  # a records file that cannot be read
+    with Inotify() as inotify:
+        view = Follower(tmp_path / "other", inotify).observe()
+        assert view.problem == f"{records}: cannot read: Is a directory"

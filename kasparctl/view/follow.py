@@ -16,6 +16,7 @@ again only after an event says it changed.
 
 from __future__ import annotations
 
+import errno
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -129,6 +130,9 @@ class Follower:
         self._watches = _Watches()
         self.current: Path | None = None
         self._known: set[Path] = set()
+        # Why a directory that is there could not be watched, e.g. permission denied.
+        self.problems: list[str] = []
+        self._unreadable = {"session": "", "daemon": ""}
         self._session: SessionView | None = None
         self._session_stale = True
         self._daemon: tuple[DaemonEvent, ...] = ()
@@ -144,6 +148,7 @@ class Follower:
         is reported rather than missed.
         """
         wanted: dict[Path, int] = {}
+        self.problems = []
         if self._watch(self.state_dir, _DIR_MASK):
             wanted[self.state_dir] = _DIR_MASK
             if self._watch(self.sessions_dir, _DIR_MASK):
@@ -170,8 +175,11 @@ class Follower:
     def _watch(self, path: Path, mask: int) -> bool:
         try:
             wd = self._inotify.add_watch(path, mask)
-        except OSError:
-            # Not there (yet), not a directory, or not ours to read: shown as missing.
+        except OSError as error:
+            # Not there (yet) is waited for; anything else (not ours to read, not a
+            # directory, too many watches) is said on screen.
+            if error.errno != errno.ENOENT:
+                self.problems.append(str(error))
             return False
         self._watches.add(wd, path)
         return True
@@ -255,17 +263,28 @@ class Follower:
 
     def observe(self, footer: str = "") -> WatchView:
         """The picture now, reading again only the files an event said changed."""
+        exists = self.state_dir in self._watches.wds
         if self._session_stale:
-            self._session = read_session(self.current) if self.current is not None else None
+            self._session, self._unreadable["session"] = None, ""
+            try:
+                self._session = read_session(self.current) if self.current is not None else None
+            except OSError as error:
+                self._unreadable["session"] = f"{error.filename}: cannot read: {error.strerror}"
             self._session_stale = False
         if self._daemon_stale:
-            read = read_json_lines(self.state_dir / EVENTS_FILE)
-            self._daemon = daemon_events(read.records)
+            self._daemon, self._unreadable["daemon"] = (), ""
+            try:
+                if exists:
+                    read = read_json_lines(self.state_dir / EVENTS_FILE)
+                    self._daemon = daemon_events(read.records)
+            except OSError as error:
+                self._unreadable["daemon"] = f"{error.filename}: cannot read: {error.strerror}"
             self._daemon_stale = False
-        exists = self.state_dir in self._watches.wds
+        unreadable = [problem for problem in self._unreadable.values() if problem]
         return WatchView(
             state_dir=str(self.state_dir),
             exists=exists,
+            problem="; ".join([*self.problems, *unreadable]),
             session=self._session,
             sessions=len(self._known),
             daemon=self._daemon,

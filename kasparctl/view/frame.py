@@ -173,7 +173,9 @@ def _header(view: WatchView, now: dt.datetime, width: int, glyphs: Glyphs) -> li
     if session is None:
         first.add(f"{glyphs.dot} {view.state_dir}", "dim")
         second = _Row(width)
-        if not view.exists:
+        if view.problem:
+            second.add(view.problem, "bad")
+        elif not view.exists:
             second.add("The state directory does not exist yet: waiting for it.", "warn")
         else:
             second.add(f"No session yet ({view.sessions} in the directory): waiting for one.")
@@ -529,6 +531,8 @@ def frame(
     lines += [()] * (height - 1 - len(lines))
     footer = _Row(width)
     warnings = session.warnings if session is not None else ()
+    if view.problem and session is not None:
+        footer.add(view.problem, "bad").add("  ")
     if warnings:
         # First: a line of the records not read is data the researcher may be missing.
         footer.add(f"{len(warnings)} line(s) not read", "warn").add("  ")

@@ -43,6 +43,13 @@ class InotifyError(OSError):
     """inotify is not available, or a watch could not be added; names the path."""
 
 
+def _error(code: int, message: str) -> InotifyError:
+    """An InotifyError whose text is `message` alone, with its errno kept for callers."""
+    error = InotifyError(message)
+    error.errno = code
+    return error
+
+
 @dataclass(frozen=True, slots=True)
 class Event:
     """One inotify event: the watch it came from, what happened, and the entry's name."""
@@ -94,7 +101,7 @@ class Inotify:
         fd = int(self._libc.inotify_init1(IN_NONBLOCK | IN_CLOEXEC))
         if fd < 0:
             code = ctypes.get_errno()
-            raise InotifyError(code, f"inotify_init1: {os.strerror(code)}")
+            raise _error(code, f"inotify_init1: {os.strerror(code)}")
         self._fd = fd
 
     def fileno(self) -> int:
@@ -109,7 +116,7 @@ class Inotify:
         wd = int(self._libc.inotify_add_watch(self._fd, os.fsencode(path), mask))
         if wd < 0:
             code = ctypes.get_errno()
-            raise InotifyError(code, f"{path}: cannot watch: {os.strerror(code)}")
+            raise _error(code, f"{path}: cannot watch: {os.strerror(code)}")
         return wd
 
     def remove_watch(self, wd: int) -> None:
@@ -117,7 +124,7 @@ class Inotify:
         if self._libc.inotify_rm_watch(self._fd, wd) < 0:
             code = ctypes.get_errno()
             if code != errno.EINVAL:
-                raise InotifyError(code, f"inotify_rm_watch: {os.strerror(code)}")
+                raise _error(code, f"inotify_rm_watch: {os.strerror(code)}")
 
     def read(self) -> list[Event]:
         """Every event waiting now; an empty list when there is none."""

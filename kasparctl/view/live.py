@@ -15,6 +15,7 @@ import contextlib
 import datetime as dt
 import os
 import selectors
+import signal
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -215,6 +216,8 @@ def run_with_view(
                 _thread.interrupt_main()
 
     thread = threading.Thread(target=show, name="live view", daemon=True)
+    # A resize wakes the view (signal handlers run in the main thread, which runs the work).
+    previous = signal.signal(signal.SIGWINCH, lambda _signum, _frame: view.redraw())
     thread.start()
     try:
         result = work()
@@ -229,4 +232,5 @@ def run_with_view(
         finished.set()
         view.stop()
         thread.join()
+        signal.signal(signal.SIGWINCH, previous)
         view.close()

@@ -207,3 +207,5 @@ class WatchView:
     # The process holding the state directory's writer lock, where the kernel tells.
     writer: int | None = None
     footer: str = ""
+    # Why part of the state directory cannot be followed (permission denied...), if so.
+    problem: str = ""
