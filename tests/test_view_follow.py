@@ -18,7 +18,7 @@ from view_records import PLAN, question, trial
 
 from kasparctl.game.records import SessionEvent, SessionRecord, StepRecord
 from kasparctl.game.session import RECORDS_FILE, Session
-from kasparctl.view.follow import EVENTS_FILE, Follower
+from kasparctl.view.follow import EVENTS_FILE, Follower, read_session
 from kasparctl.view.frame import UNICODE, plain_text
 from kasparctl.view.inotify import IN_CREATE, IN_MODIFY, Event, Inotify, parse_events
 from kasparctl.view.live import LiveView
@@ -123,6 +123,8 @@ def test_a_torn_last_line_is_shown_as_unread_and_the_repair_is_followed(tmp_path
         )
         assert view.session is not None and view.session.warnings == ()
         assert view.session.resumes == 1
+        # Folded on record by record as they came, it is the view of the whole log.
+        assert view.session == read_session(session.directory)
         resumed.close()
 
 

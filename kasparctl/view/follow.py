@@ -31,7 +31,7 @@ from kasparctl.game.session import (
     read_json_lines,
     read_records,
 )
-from kasparctl.view.fold import daemon_events, session_view
+from kasparctl.view.fold import SessionFold, daemon_events
 from kasparctl.view.inotify import (
     IN_CREATE,
     IN_DELETE,
@@ -78,10 +78,38 @@ def read_plan(directory: Path) -> dict[str, Any] | None:
 
 def read_session(directory: Path) -> SessionView:
     """The view of one session directory as it is on disk now."""
-    read = read_records(directory / RECORDS_FILE)
-    view = session_view(read_plan(directory), read.records, read.warnings)
-    # A plan not yet readable still has its directory's name.
-    return view if view.session else replace(view, session=directory.name)
+    return SessionReader(directory).read()
+
+
+class SessionReader:
+    """One session's view, read again after each change and folded on from where it was.
+
+    The records are read whole each time (by the game's reader), but folded only from
+    the first new one while the ones folded before are still there, as they are in an
+    append-only log; anything else (a different plan, a shorter log) folds them again.
+    """
+
+    def __init__(self, directory: Path) -> None:
+        """Read the session in `directory`."""
+        self.directory = directory
+        self._plan: dict[str, Any] | None = None
+        self._fold = SessionFold(None)
+        self._folded: list[tuple[int, str]] = []  # (seq, time) of each record folded
+
+    def read(self) -> SessionView:
+        """The view as of the files now."""
+        plan = read_plan(self.directory)
+        read = read_records(self.directory / RECORDS_FILE)
+        done = len(self._folded)
+        keys = [(record.seq, record.time) for record in read.records[:done]]
+        if plan != self._plan or keys != self._folded[: len(keys)] or len(keys) < done:
+            self._plan, self._fold, self._folded, done = plan, SessionFold(plan), [], 0
+        for record in read.records[done:]:
+            self._fold.apply(record)
+            self._folded.append((record.seq, record.time))
+        view = replace(self._fold.view, warnings=tuple(read.warnings))
+        # A plan not yet readable still has its directory's name.
+        return view if view.session else replace(view, session=self.directory.name)
 
 
 def writer_pid(state_dir: Path) -> int | None:
@@ -133,6 +161,7 @@ class Follower:
         # Why a directory that is there could not be watched, e.g. permission denied.
         self.problems: list[str] = []
         self._unreadable = {"session": "", "daemon": ""}
+        self._session_reader: SessionReader | None = None
         self._session: SessionView | None = None
         self._session_stale = True
         self._daemon: tuple[DaemonEvent, ...] = ()
@@ -261,13 +290,20 @@ class Follower:
 
     # -- what to show -----------------------------------------------------------
 
+    def _reader(self, directory: Path) -> SessionReader:
+        """The reader of the current session, kept while it stays current."""
+        if self._session_reader is None or self._session_reader.directory != directory:
+            self._session_reader = SessionReader(directory)
+        return self._session_reader
+
     def observe(self, footer: str = "") -> WatchView:
         """The picture now, reading again only the files an event said changed."""
         exists = self.state_dir in self._watches.wds
         if self._session_stale:
             self._session, self._unreadable["session"] = None, ""
             try:
-                self._session = read_session(self.current) if self.current is not None else None
+                current = self.current
+                self._session = self._reader(current).read() if current is not None else None
             except OSError as error:
                 self._unreadable["session"] = f"{error.filename}: cannot read: {error.strerror}"
             self._session_stale = False
