@@ -10,7 +10,7 @@ import re
 import pytest
 from view_records import PLAN, TOYS, Stamper, question, trial
 
-from kasparctl.game.records import FaultRecord, FaultSource, StepRecord
+from kasparctl.game.records import FaultRecord, FaultSource, QuestionRecord, StepRecord
 from kasparctl.view.ages import ago, next_change
 from kasparctl.view.fold import session_view
 from kasparctl.view.frame import ASCII, frame, plain_text, seconds_to_redraw
@@ -176,3 +176,26 @@ def test_rich_screen_colours_and_respects_no_color(monkeypatch: pytest.MonkeyPat
 
 def test_keys_as_terminals_send_them() -> None:
     assert parse_keys(b"q \x1b[C\x1b[D\x1bOH+") == ["q", " ", "right", "left", "home", "+"]
+
+
+def test_with_more_toys_than_rows_the_guess_and_the_most_likely_are_shown() -> None:
+    toys = [f"toy{i}" for i in range(12)]
+    weights = [i + 1.0 for i in range(12)]
+    asked = QuestionRecord(
+        trial=1,
+        problem_trial=1,
+        target="bag 1",
+        target_index=0,
+        child="child one",
+        child_index=0,
+        candidates=toys,
+        probabilities=[w / sum(weights) for w in weights],
+        entropy=3.4,
+        band="unsure",
+        choice="toy0",
+        choice_index=0,
+    )
+    lines, _, _ = picture(StepRecord(to="guessing"), asked)
+    shown = [line.split()[0] for line in lines if line.startswith("  toy")]
+    assert len(lines) == 24 and shown[0] == "toy0" and shown[-1] == "toy11"
+    assert "  +3 less likely" in lines

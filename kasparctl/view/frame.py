@@ -261,8 +261,8 @@ def _question_block(session: SessionView, height: int, width: int, glyphs: Glyph
     room = max(height - 2 - (1 if others else 0), 1)
     shown = offered
     if len(offered) > room:
-        # The most likely first, in the game's order, when not all fit.
-        keep = set(sorted(offered, key=lambda bar: -bar.probability)[: room - 1])
+        # When not all fit: Kaspar's guess and the most likely, in the game's order.
+        keep = set(sorted(offered, key=lambda bar: (not bar.chosen, -bar.probability))[: room - 1])
         shown = [bar for bar in offered if bar in keep]
     name_width = max([len(bar.toy) for bar in shown] + [6])
     name_width = min(name_width, max(width // 4, 8))
