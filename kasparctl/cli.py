@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "sessions",
     "export",
     "report",
+    "watch",
 )
 
 

@@ -41,6 +41,14 @@ def plain_records(path: Path) -> list[dict[str, Any]]:
     return [{k: v for k, v in record.items() if k != "time"} for record in records]
 
 
+def without_questions(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The records as that code wrote them: today's game also records each question
+    before asking it (history only, for the live view), so those are left out and the
+    others numbered again in their order."""
+    kept = [record for record in records if record["kind"] != "question"]
+    return [{**record, "seq": seq} for seq, record in enumerate(kept, start=1)]
+
+
 def test_every_session_loads_whole() -> None:
     assert len(SESSIONS) == 3
     for directory in SESSIONS:
@@ -113,7 +121,7 @@ def test_the_interrupted_session_resumes_to_the_same_end(tmp_path: Path, from_re
     result = run_demo(demo_config(), options, fast=True)
     assert result.resumed and result.finished
     expected = "resumed-from-records" if from_records else "resumed"
-    got = plain_records(copy / RECORDS_FILE)
+    got = without_questions(plain_records(copy / RECORDS_FILE))
     want = plain_records(EXPECTED / f"{expected}.records.jsonl")
     assert len(got) == len(want)
     for mine, theirs in zip(got, want, strict=True):

@@ -8,19 +8,28 @@ directory, exactly as on the robot; an unfinished session there is resumed.
 from __future__ import annotations
 
 import argparse
+import io
 import json
+import os
 import secrets
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
-from kasparctl.config import ConfigError, load_config
+from kasparctl.config import Config, ConfigError, load_config
 from kasparctl.game.phrases import PhraseError
 from kasparctl.game.session import SessionError
 from kasparctl.learning.learner import LearnerError
 from kasparctl.log import configure_logging
-from kasparctl.sim.demo import DemoOptions, DemoStalled, demo_config, run_demo, with_variant
+from kasparctl.sim.demo import (
+    DemoOptions,
+    DemoResult,
+    DemoStalled,
+    demo_config,
+    run_demo,
+    with_variant,
+)
 from kasparctl.sim.teacher import Teacher, TeacherError
 
 
@@ -47,6 +56,11 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--json", action="store_true", help="end with one JSON line summarising the game"
     )
+    parser.add_argument(
+        "--view",
+        action="store_true",
+        help="draw the game as `kasparctl watch` does (on a terminal; else the transcript)",
+    )
     parser.set_defaults(run=run)
 
 
@@ -55,6 +69,10 @@ def run(arguments: argparse.Namespace) -> int:
     if arguments.interactive and arguments.fast:
         # Simulated time would rush through every prompt before a person could type.
         print("error: --interactive: needs real or --speed time, not --fast", file=sys.stderr)
+        return 1
+    if arguments.view and (arguments.interactive or arguments.fast):
+        # The view has the terminal; in simulated time it would only show the end.
+        print("error: --view: needs real or --speed time, without --interactive", file=sys.stderr)
         return 1
     if arguments.speed is not None and not arguments.speed > 0:
         print(f"error: --speed: expected a number > 0, found {arguments.speed}", file=sys.stderr)
@@ -67,18 +85,28 @@ def run(arguments: argparse.Namespace) -> int:
     except (ConfigError, TeacherError, LearnerError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
-    # The dialogue is the demo's output; log lines go to stderr, warnings and worse only.
-    configure_logging("warning", "console", stream=sys.stderr)
+    view = arguments.view and sys.stdout.isatty()
+    if arguments.view and not view:
+        print("note: --view: stdout is not a terminal, so the transcript", file=sys.stderr)
+    # The dialogue is the demo's output; log lines go to stderr, warnings and worse only
+    # (held back while the view has the screen, and printed after).
+    held_logs = io.StringIO()
+    configure_logging("warning", "console", stream=held_logs if view else sys.stderr)
     seed = arguments.seed if arguments.seed is not None else secrets.randbelow(2**31)
     state_dir = Path(arguments.state_dir or tempfile.mkdtemp(prefix="kaspar-demo-"))
     options = DemoOptions(
         state_dir=state_dir, seed=seed, teacher=teacher, interactive=arguments.interactive
     )
     try:
-        result = run_demo(config, options, speed=arguments.speed, fast=arguments.fast)
+        if view:
+            result = _with_view(config, options, arguments.speed)
+        else:
+            result = run_demo(config, options, speed=arguments.speed, fast=arguments.fast)
     except (PhraseError, SessionError, ConfigError, DemoStalled) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
+    finally:
+        sys.stderr.write(held_logs.getvalue())
     print(
         f"\n{result.trials} guesses, {result.learned} toys learned, session {result.session} "
         f"{result.final_state} (seed {seed}). Records: {state_dir}"
@@ -86,3 +114,27 @@ def run(arguments: argparse.Namespace) -> int:
     if arguments.json:
         print(json.dumps(result.summary()))
     return 0
+
+
+def _with_view(config: Config, options: DemoOptions, speed: float | None) -> DemoResult:
+    """The demo drawn by the live view: the transcript goes nowhere, the records are the picture."""
+    # Imported here: the daemon, which imports every command module, does not need them.
+    from kasparctl.view.live import run_with_view
+    from kasparctl.view.screen import open_keys, open_screen
+
+    with open(os.devnull, "w", encoding="utf-8") as transcript:
+        options.out = transcript
+        keys = open_keys(sys.stdin)
+        screen = open_screen(sys.stdout)
+        try:
+            return run_with_view(
+                options.state_dir,
+                lambda: run_demo(config, options, speed=speed),
+                screen,
+                keys,
+                lambda result: f"the demo is {result.final_state}.",
+            )
+        finally:
+            screen.close()
+            if keys is not None:
+                keys.close()

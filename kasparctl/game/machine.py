@@ -75,7 +75,7 @@ from kasparctl.game.stages import (
     bound_transitions,
 )
 from kasparctl.game.state import GameState
-from kasparctl.game.trial import Answer, TrialPlan, plan_trial, score_answer
+from kasparctl.game.trial import Answer, TrialPlan, plan_trial, question_record, score_answer
 from kasparctl.log import bind_context
 from kasparctl.vocabulary import Command
 
@@ -536,6 +536,7 @@ class Game:
         group_size = self._group_size()
         plan = plan_trial(state, params, self.settings, session_plan, group_size, self.speech.book)
         bind_context(trial=plan.trial, target=plan.target_name)
+        self._record(question_record(plan))  # history only: the open question, for readers
         # Presses from here until the question is finished are recorded and ignored.
         answer = self.presses.open()
         await self.speech.say("turn.child", child=plan.child)

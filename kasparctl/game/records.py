@@ -167,6 +167,31 @@ class UndoRecord(Record, tag="undo", kw_only=True, frozen=True):
     trial: int
 
 
+class QuestionRecord(Record, tag="question", kw_only=True, frozen=True):
+    """Kaspar is about to ask a question of step 4: where it points, whose turn, how sure it is.
+
+    Written when the trial is planned, before Kaspar speaks, so a reader (the
+    researcher's live view, `kasparctl watch`) sees the open question; history
+    only, it changes no state. The trial record of the same number answers it and
+    repeats these fields; a question asked again (after a pause, a fault or a
+    resume) is recorded again, with the same values.
+    """
+
+    trial: int
+    problem_trial: int
+    target: str
+    target_index: int
+    child: str
+    child_index: int
+    candidates: list[str]
+    # Over every toy, as in the trial record: 0 for those no longer offered.
+    probabilities: list[float]
+    entropy: float
+    band: str | None
+    choice: str
+    choice_index: int
+
+
 class TrialRecord(Record, tag="trial", kw_only=True, frozen=True):
     """One guess: the question Kaspar asked, the answer, and what the learner made of it.
 
@@ -218,6 +243,7 @@ AnyRecord = (
     | PoseRecord
     | StepRecord
     | UndoRecord
+    | QuestionRecord
     | TrialRecord
 )
 

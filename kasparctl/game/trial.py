@@ -22,7 +22,7 @@ import numpy as np
 
 from kasparctl.config import GameSettings, SessionPlan
 from kasparctl.game.phrases import PhraseBook
-from kasparctl.game.records import Button, TrialRecord
+from kasparctl.game.records import Button, QuestionRecord, TrialRecord
 from kasparctl.game.state import GameState
 from kasparctl.learning.learner import (
     FloatArray,
@@ -106,6 +106,24 @@ def plan_trial(
         choice=choice,
         toy=settings.toys[choice],
         learner_rng=dict(rng.bit_generator.state),
+    )
+
+
+def question_record(plan: TrialPlan) -> QuestionRecord:
+    """The record of the question `plan` asks, written before Kaspar asks it."""
+    return QuestionRecord(
+        trial=plan.trial,
+        problem_trial=plan.problem_trial,
+        target=plan.target_name,
+        target_index=plan.target,
+        child=plan.child,
+        child_index=plan.child_index,
+        candidates=list(plan.candidates),
+        probabilities=plan.probabilities.tolist(),
+        entropy=plan.entropy,
+        band=plan.band,
+        choice=plan.toy,
+        choice_index=plan.choice,
     )
 
 

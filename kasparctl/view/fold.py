@@ -1,0 +1,375 @@
+"""The live view's picture of a session: a pure function of its typed records.
+
+`session_view(plan, records)` folds the records of one session, in order, into
+a SessionView: the stage the game is in, the open question (or the last one
+answered) with the learner's probability of each toy, the answers so far, the
+toys learned, the researcher's commands and the faults. `daemon_events`
+reads the daemon's own log (events.jsonl) as plain data, since the daemon
+may write kinds this code does not know. No clock, no I/O: the renderer
+decides what "how long ago" means.
+
+The stage follows the machine as the records tell it: a step record moves it,
+an applied pause or resume, a fault the game stopped for, a shutdown of the
+daemon and a resume of the session; where the records cannot tell (a record
+written by newer code, a session cut short), the last known stage stands.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from typing import Any
+
+from msgspec import UNSET
+
+from kasparctl.game.records import (
+    AnyRecord,
+    CommandRecord,
+    Confirmation,
+    FaultRecord,
+    HalEvent,
+    HalRecord,
+    PoseRecord,
+    PressRecord,
+    PromptRecord,
+    QuestionRecord,
+    SessionEvent,
+    SessionRecord,
+    StepRecord,
+    TrialRecord,
+    UndoRecord,
+)
+from kasparctl.game.stages import ENDS, STEPS
+from kasparctl.view.model import (
+    Answer,
+    Bar,
+    CommandSeen,
+    DaemonEvent,
+    FaultSeen,
+    Learned,
+    Question,
+    SessionView,
+)
+
+
+def _text(plain: Mapping[str, Any], *keys: str) -> str:
+    for key in keys:
+        value = plain.get(key)
+        if value not in (None, ""):
+            return str(value)
+    return ""
+
+
+def daemon_events(lines: Sequence[Mapping[str, Any]]) -> tuple[DaemonEvent, ...]:
+    """The daemon's own events (faults outside a session among them), from events.jsonl.
+
+    Read as plain JSON objects so a kind this code does not know still shows:
+    its time, its name (`event`, else `kind`) and its detail (`detail`, `reason`
+    or `error`). An event is a fault when its kind or name says "fault".
+    """
+    events = []
+    for plain in lines:
+        name = _text(plain, "event", "kind") or "event"
+        kind = _text(plain, "kind")
+        detail = _text(plain, "detail", "reason", "error", "message")
+        fault = "fault" in name or "fault" in kind
+        if fault and _text(plain, "fault"):
+            name = _text(plain, "fault")
+        events.append(DaemonEvent(_text(plain, "time"), name, detail, fault))
+    return tuple(events)
+
+
+def session_view(
+    plan: Mapping[str, Any] | None,
+    records: Sequence[AnyRecord],
+    warnings: Sequence[str] = (),
+) -> SessionView:
+    """The view of a session from its plan.json (None if unreadable) and its records in order."""
+    fold = SessionFold(plan)
+    for record in records:
+        fold.apply(record)
+    return replace(fold.view, warnings=tuple(warnings))
+
+
+def _identity(meta: Mapping[str, Any]) -> SessionView:
+    plan = meta.get("plan") if isinstance(meta.get("plan"), Mapping) else {}
+    assert isinstance(plan, Mapping)
+    speak = plan.get("speak_uncertainty")
+    profile = str(plan.get("profile") or "")
+    condition = meta.get("condition")
+    if not condition and profile:
+        condition = f"{profile}/{'spoken' if speak is not False else 'silent'}"
+    return SessionView(
+        session=str(meta.get("session") or ""),
+        group=str(meta.get("group") or plan.get("group") or ""),
+        condition=str(condition or ""),
+        variant=str(meta.get("variant") or ""),
+        profile=profile,
+        speak_uncertainty=speak if isinstance(speak, bool) else None,
+        answer_key=bool(plan.get("answer_key")),
+    )
+
+
+class SessionFold:
+    """The view so far, moved on one record at a time (a replay steps forward with it)."""
+
+    def __init__(self, plan: Mapping[str, Any] | None) -> None:
+        """The view of a session with `plan` (its plan.json) and no records yet."""
+        self.view = _identity(plan or {})
+
+    def apply(self, record: AnyRecord) -> None:
+        """Move the view on by the next record."""
+        view = self.view
+        view = replace(
+            view,
+            records=view.records + 1,
+            last_seq=max(view.last_seq, record.seq),
+            last_time=record.time or view.last_time,
+            # Anything recorded after a shutdown means the daemon is back.
+            shutdown=None,
+        )
+        handler = _HANDLERS.get(type(record))
+        self.view = handler(view, record) if handler is not None else view
+
+
+def _on_session(view: SessionView, record: SessionRecord) -> SessionView:
+    if record.event is SessionEvent.START:
+        plan = record.plan if isinstance(record.plan, dict) else None
+        fresh = _identity(plan) if plan else view
+        return replace(
+            view,
+            session=view.session or fresh.session,
+            group=view.group or fresh.group,
+            condition=view.condition or fresh.condition,
+            variant=view.variant or fresh.variant,
+            profile=view.profile or fresh.profile,
+            speak_uncertainty=(
+                view.speak_uncertainty
+                if view.speak_uncertainty is not None
+                else fresh.speak_uncertainty
+            ),
+            answer_key=view.answer_key or fresh.answer_key,
+        )
+    if record.event is SessionEvent.RESUMED:
+        # The daemon started again: the hardware is opened anew, so nothing is pending.
+        stage = record.step if isinstance(record.step, str) else view.stage
+        return replace(
+            view,
+            stage=stage,
+            resumes=view.resumes + 1,
+            keyfob_lost=False,
+            faults=_settled(view.faults),
+            question=_interrupted(view.question),
+        )
+    reason = record.reason if isinstance(record.reason, str) else "stopped"
+    return replace(view, shutdown=reason, question=_interrupted(view.question))
+
+
+def _interrupted(question: Question | None) -> Question | None:
+    """An open question the daemon stopped in (or was killed in) no longer stands."""
+    if question is not None and question.open:
+        return replace(question, interrupted=True)
+    return question
+
+
+def _on_step(view: SessionView, record: StepRecord) -> SessionView:
+    step = record.to if record.to in STEPS else view.step
+    return replace(view, stage=record.to, step=step, faults=_settled(view.faults))
+
+
+def _settled(faults: tuple[FaultSeen, ...]) -> tuple[FaultSeen, ...]:
+    """The faults with none pending: the game left the fault stage."""
+    if not any(fault.pending for fault in faults):
+        return faults
+    return tuple(replace(fault, pending=False) for fault in faults)
+
+
+def _on_command(view: SessionView, record: CommandRecord) -> SessionView:
+    outcome = str(record.confirm) if record.applied and record.confirm is not UNSET else ""
+    if not record.applied:
+        outcome = record.ignored if isinstance(record.ignored, str) else "ignored"
+    seen = CommandSeen(
+        record.time, record.gesture, str(record.command), record.applied, outcome, record.state
+    )
+    view = replace(view, commands=(*view.commands, seen))
+    if not record.applied:
+        return view
+    if record.confirm == Confirmation.PAUSE:
+        return replace(view, stage="paused")
+    if record.confirm == Confirmation.RESUME:
+        # Back to the step left (idle when a fault came before the first step).
+        stage = view.step if view.step is not None and view.stage in ("paused", "fault") else None
+        return replace(view, stage=stage or "idle", faults=_settled(view.faults))
+    return view
+
+
+def _on_fault(view: SessionView, record: FaultRecord) -> SessionView:
+    # Written with its joint (null for parts that have none) only when the game stopped for it.
+    stops = record.joint is not UNSET and record.state not in ENDS
+    joint = record.joint if isinstance(record.joint, str) else None
+    seen = FaultSeen(record.time, str(record.fault), record.detail, joint, stops, stops)
+    stage = "fault" if stops else view.stage
+    return replace(view, faults=(*view.faults, seen), stage=stage)
+
+
+def _on_hal(view: SessionView, record: HalRecord) -> SessionView:
+    if record.event is HalEvent.KEYFOB_BACK:
+        return replace(view, keyfob_lost=False)
+    if record.event is HalEvent.KEYFOB_LOST:
+        # The fault record that follows says it stopped the game; this says the keyfob is gone.
+        return replace(view, keyfob_lost=True)
+    status = record.status if isinstance(record.status, str) else "failed"
+    said = record.text if isinstance(record.text, str) else ""
+    detail = f"line not heard ({status}): {said}" if said else f"line not heard ({status})"
+    if isinstance(record.error, str):
+        detail += f"; {record.error}"
+    seen = FaultSeen(record.time, "voice", detail)
+    return replace(view, faults=(*view.faults, seen))
+
+
+def _on_pose(view: SessionView, record: PoseRecord) -> SessionView:
+    teaching = view.teaching
+    return replace(
+        view,
+        teaching=replace(
+            teaching, poses=teaching.poses + 1, round=record.round, bag=record.bag + 1
+        ),
+    )
+
+
+def _on_press(view: SessionView, record: PressRecord) -> SessionView:
+    if record.teach_retry is not UNSET:
+        teaching = view.teaching
+        return replace(view, teaching=replace(teaching, retries=teaching.retries + 1))
+    question = view.question
+    early = isinstance(record.ignored, str) and record.ignored.startswith("before the question")
+    if question is not None and question.open and early:
+        return replace(view, question=replace(question, early_presses=question.early_presses + 1))
+    return view
+
+
+def _on_prompt(view: SessionView, record: PromptRecord) -> SessionView:
+    question = view.question
+    if question is not None and question.open:
+        return replace(view, question=replace(question, prompts=question.prompts + 1))
+    return view
+
+
+def _toys(
+    view: SessionView, candidates: Sequence[str], probabilities: Sequence[float]
+) -> tuple[str, ...]:
+    """Every toy in the game's order: the first question offers them all."""
+    if view.toys and len(view.toys) == len(probabilities):
+        return view.toys
+    if len(candidates) == len(probabilities):
+        return tuple(candidates)
+    # Joined a session whose first questions are unreadable: the offered toys have a
+    # probability above 0, in order; the others are named by their place.
+    names = iter(candidates)
+    return tuple(
+        (next(names, f"toy {i + 1}") if p > 0 else f"toy {i + 1}")
+        for i, p in enumerate(probabilities)
+    )
+
+
+def _question(
+    view: SessionView, record: QuestionRecord | TrialRecord
+) -> tuple[tuple[str, ...], Question]:
+    toys = _toys(view, record.candidates, record.probabilities)
+    offered = set(record.candidates)
+    bars = tuple(
+        Bar(toy, probability, toy in offered, toy == record.choice)
+        for toy, probability in zip(toys, record.probabilities, strict=False)
+    )
+    question = Question(
+        trial=record.trial,
+        problem_trial=record.problem_trial,
+        target=record.target,
+        child=record.child,
+        bars=bars,
+        entropy=record.entropy,
+        max_entropy=math.log2(len(record.candidates)) if record.candidates else 0.0,
+        band=record.band,
+        choice=record.choice,
+        asked_at=record.time,
+    )
+    return toys, question
+
+
+def _with_target(targets: tuple[str, ...], target: str) -> tuple[str, ...]:
+    return targets if target in targets else (*targets, target)
+
+
+def _on_question(view: SessionView, record: QuestionRecord) -> SessionView:
+    toys, question = _question(view, record)
+    return replace(
+        view, question=question, toys=toys, targets=_with_target(view.targets, record.target)
+    )
+
+
+def _on_trial(view: SessionView, record: TrialRecord) -> SessionView:
+    asked = view.question
+    if asked is not None and asked.trial == record.trial:
+        question = asked
+        toys = view.toys
+    else:
+        # Recorded before question records existed: the trial says what was asked.
+        toys, question = _question(view, record)
+    question = replace(question, answer=record.feedback, reaction_time=record.reaction_time)
+    answer = Answer(
+        trial=record.trial,
+        problem_trial=record.problem_trial,
+        target=record.target,
+        child=record.child,
+        choice=record.choice,
+        feedback=record.feedback,
+        reaction_time=record.reaction_time,
+        correct=record.correct,
+        feedback_right=record.feedback_right,
+        learned=record.learned,
+        perseverative=record.perseverative,
+        win_shift=record.win_shift,
+        time=record.time,
+    )
+    learned = view.learned
+    if record.learned:
+        learned = (
+            *learned,
+            Learned(record.target, record.choice, record.problem_trial, record.trial),
+        )
+    return replace(
+        view,
+        question=question,
+        toys=toys,
+        answers=(*view.answers, answer),
+        learned=learned,
+        targets=_with_target(view.targets, record.target),
+    )
+
+
+def _on_undo(view: SessionView, record: UndoRecord) -> SessionView:
+    answers = tuple(
+        replace(answer, undone=True) if answer.trial == record.trial else answer
+        for answer in view.answers
+    )
+    learned = tuple(item for item in view.learned if item.trial != record.trial)
+    question = view.question
+    if question is not None and question.trial == record.trial:
+        question = replace(question, undone=True)
+    return replace(view, answers=answers, learned=learned, question=question)
+
+
+_HANDLERS: dict[type, Any] = {
+    SessionRecord: _on_session,
+    StepRecord: _on_step,
+    CommandRecord: _on_command,
+    FaultRecord: _on_fault,
+    HalRecord: _on_hal,
+    PoseRecord: _on_pose,
+    PressRecord: _on_press,
+    PromptRecord: _on_prompt,
+    QuestionRecord: _on_question,
+    TrialRecord: _on_trial,
+    UndoRecord: _on_undo,
+}
