@@ -176,6 +176,9 @@ async def test_ping_is_stat_and_names_the_model(tmp_path):
 
 
 async def test_the_ack_policy_is_written_to_register_1_by_broadcast_at_start(drs, driver):
+    # A broadcast has no reply: start() returns once it is written, maybe before the
+    # emulator's thread has read it.
+    await eventually(lambda: drs.received)
     (first, *_) = drs.received
     request = hx.decode_packet(first)
     assert request.servo_id == hx.BROADCAST_ID and request.command == hx.Command.RAM_WRITE
