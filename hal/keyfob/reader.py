@@ -165,7 +165,11 @@ class Keyfob:
         try:
             self._open()
         except (OSError, KeyfobError) as error:
-            self._report_lost(f"not available at start: {_describe(error)}")
+            # Said once here: a Bluetooth keyfob pairs after the computer starts, a USB
+            # one is plugged in late; the watch below finds it when it comes.
+            reason = f"not available at start: {_describe(error)}"
+            log.warning("keyfob not connected; watching for it", reason=reason)
+            self._report_lost(reason)
 
     async def next_event(self) -> InputEvent:
         """The next gesture or lost/back event, in order; waits as long as it takes."""
