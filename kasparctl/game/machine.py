@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Callable, Coroutine, Sequence
+from collections.abc import Callable, Coroutine, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar, cast
 
@@ -172,12 +172,15 @@ class Game:
         *,
         event_log: EventLog | None = None,
         startup_faults: Sequence[HardwareFault] = (),
+        known_problems: Mapping[FaultSource, str] | None = None,
     ) -> None:
         """A game that opens its session with `open_session` at the start, or resumes `resumed`.
 
         While no session is open its records go to `event_log` (with none, they are
         only logged). `startup_faults` happened before the game (a servo that did not
         start, sessions that could not be read): the game begins by stopping for them.
+        `known_problems` are those an earlier game saw and only a success clears (the
+        voice, the disk): shown from the start.
         """
         self.config = config
         self.settings = config.game
@@ -187,10 +190,12 @@ class Game:
         self.event_log = event_log
         self._startup_faults = tuple(startup_faults)
         # What is not working now, by part: shown by the daemon, cleared as each comes back.
-        self.problems: dict[FaultSource, str] = {}
+        self.problems: dict[FaultSource, str] = dict(known_problems or {})
+        self.speech.failing = self.problems.get(FaultSource.VOICE)
         # The kinds of fault Kaspar has said since the game last stopped for one.
         self._said_in_fault: set[FaultSource] = set()
         self._unwritten: list[tuple[Session | EventLog, Record, float]] = []
+        self._storage_fault_queued = False
         self._open_session = open_session
         self.session: Session | None = None
         self.plan: SessionPlan | None = None
@@ -244,10 +249,13 @@ class Game:
         """Play until the session is finished or stopped; returns the final stage."""
         readers = [asyncio.create_task(self._read_keyfob(), name="keyfob reader")]
         # The HAL latches faults and takes the safe action itself; the game only has
-        # to stop the step and say so, once per fault, including any latched already.
+        # to stop the step and say so, once per fault, including any latched already
+        # (those stop the game before it begins: it never shows idle with them).
         self.hw.servos.on_fault(self._fault_latched)
         for fault in self.hw.servos.faults:
-            self._fault_latched(fault)
+            if fault not in self._seen_faults:
+                self._seen_faults.add(fault)
+                self._startup_faults += (_servo_fault(fault),)
         self.hw.keyfob.set_needs(gesture_needs(self.commands))
         try:
             try:
@@ -268,12 +276,23 @@ class Game:
             for task in readers:
                 task.cancel()
             await asyncio.gather(*readers, return_exceptions=True)
-            if self._unwritten:
-                log.error(
-                    "records never written: the disk did not take them again",
-                    count=len(self._unwritten),
-                )
         return self.stage
+
+    def flush_unwritten(self) -> int:
+        """Write the records the disk refused, in order, as far as it takes them now.
+
+        Returns how many are still unwritten (each is in the journal whole); for the
+        daemon to try once more as the game ends, before its session is closed.
+        """
+        try:
+            self._write_unwritten()
+        except StorageFailed as error:
+            log.error(
+                "records not written; the journal holds them",
+                count=len(self._unwritten),
+                error=str(error),
+            )
+        return len(self._unwritten)
 
     async def _begin(self) -> None:
         if self.resumed:
@@ -347,8 +366,7 @@ class Game:
     def _fault_latched(self, fault: Fault) -> None:
         if fault not in self._seen_faults:
             self._seen_faults.add(fault)
-            detail = f"{fault.kind.value}: {fault.detail}"
-            self._inputs.put_nowait(HardwareFault(FaultSource.SERVO, detail, fault.joint))
+            self._inputs.put_nowait(_servo_fault(fault))
 
     # -- gestures ---------------------------------------------------------------
 
@@ -469,6 +487,8 @@ class Game:
 
     async def _entered(self) -> None:
         stage = self.stage
+        if stage != "fault":
+            self._said_in_fault = set()  # what was said about the last stop is no news now
         bind_context(step=stage)
         self._emit(GameEvent.STATE, state=stage)
         state = self.session_state
@@ -548,6 +568,8 @@ class Game:
     async def _on_fault(self, fault: HardwareFault) -> None:
         """Record, log, show and say a fault; stop the running step where the kind stops it."""
         stage = self.stage
+        if fault.kind is FaultSource.STORAGE:
+            self._storage_fault_queued = False
         # Known before it is recorded: a record that fails for the same disk is not a new fault.
         self._set_problem(fault.kind, _problem(fault), logged=True)
         self._record(
@@ -780,13 +802,16 @@ class Game:
         if target is None:
             log.info("not recorded: no session is open", record=repr(record))
             return None
+        self._write_unwritten()
+        written = target.record(record, self._now())
+        self._set_problem(FaultSource.STORAGE, None)
+        return written
+
+    def _write_unwritten(self) -> None:
         while self._unwritten:
             kept_target, kept, at = self._unwritten[0]
             kept_target.record(kept, at)
             self._unwritten.pop(0)
-        written = target.record(record, self._now())
-        self._set_problem(FaultSource.STORAGE, None)
-        return written
 
     def _record(self, record: RecordT) -> RecordT | None:
         """Record history (a fault, an ignored press): never raises. One the disk refuses is
@@ -803,8 +828,12 @@ class Game:
             return None
 
     def _storage_failed(self, error: StorageFailed) -> None:
-        if FaultSource.STORAGE not in self.problems:
-            self._set_problem(FaultSource.STORAGE, str(error), logged=True)
+        """A write failed where nothing else stops for it: a storage fault, once per stop."""
+        self._set_problem(FaultSource.STORAGE, str(error), logged=True)
+        # Once per stop: in the fault stage, or once the session is over, it is said once.
+        said = FaultSource.STORAGE in self._said_in_fault and self.stage in ("fault", *ENDS)
+        if not (said or self._storage_fault_queued):
+            self._storage_fault_queued = True
             self._inputs.put_nowait(HardwareFault(FaultSource.STORAGE, str(error)))
 
     def _change(self, record: RecordT) -> RecordT:
@@ -859,6 +888,10 @@ def _describe(event: GameInput) -> str:
     if isinstance(event, HardwareFault):
         return f"handling a {event.kind.value} fault"
     return f"handling the keyfob {'lost' if isinstance(event, KeyfobLost) else 'back'}"
+
+
+def _servo_fault(fault: Fault) -> HardwareFault:
+    return HardwareFault(FaultSource.SERVO, f"{fault.kind.value}: {fault.detail}", fault.joint)
 
 
 def _problem(fault: HardwareFault) -> str:

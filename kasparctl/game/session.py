@@ -29,6 +29,7 @@ import contextlib
 import datetime as dt
 import os
 import re
+import shutil
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -326,9 +327,14 @@ class Session:
         directory = sessions / session_id
         try:
             directory.mkdir(mode=PRIVATE_DIR)
+        except OSError as error:
+            raise _storage_failed(directory, "cannot create the session", error) from error
+        try:
             full_plan = {"session": session_id, "created": _utc_now(), **plan}
             write_atomic(directory / PLAN_FILE, _encoder.encode(full_plan))
         except OSError as error:
+            # No half-made session left behind: a directory without its plan is no session.
+            shutil.rmtree(directory, ignore_errors=True)
             raise _storage_failed(directory, "cannot create the session", error) from error
         return cls(directory, full_plan, last_seq=0)
 

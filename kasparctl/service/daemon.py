@@ -124,6 +124,7 @@ class Daemon:
         self._pending_faults: list[HardwareFault] = []
         self._read_again = False
         self._playing: asyncio.Task[str] | None = None
+        self._carried_problems: dict[FaultSource, str] = {}
 
     def _load(self) -> Config:
         config = load_config(self.options.config_path)
@@ -264,6 +265,7 @@ class Daemon:
             resumed,
             event_log=self.events,
             startup_faults=faults,
+            known_problems=self._carried_problems,
         )
         game.listeners.append(self._on_game_event)
         game.listeners.extend(self.listeners)
@@ -286,6 +288,14 @@ class Daemon:
             detail = f"the game ended by an error: {failure!r}"
             self._pending_faults.append(HardwareFault(FaultSource.SOFTWARE, detail))
         self._playing = None
+        game.flush_unwritten()
+        # Only a line heard or a record written shows these work again: the next game
+        # shows them until then.
+        self._carried_problems = {
+            kind: detail
+            for kind, detail in game.problems.items()
+            if kind in (FaultSource.VOICE, FaultSource.STORAGE)
+        }
         if game.session is not None:
             game.session.close()
         if self._reload:
