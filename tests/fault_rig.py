@@ -55,6 +55,18 @@ locations = ["box", "shelf", "basket"]
 poses = { box = { right_shoulder_pitch = -40.0, right_shoulder_roll = 10.0 }, shelf = { right_shoulder_pitch = -70.0, right_shoulder_roll = 40.0 }, basket = { right_shoulder_pitch = -30.0, right_shoulder_roll = 70.0 } }
 """
 # What aplay says without a sound card: the cause first, then its consequences.
+ALSA_NO_CARD = """\
+ALSA lib confmisc.c:855:(parse_card) cannot find card '0'
+ALSA lib conf.c:5178:(_snd_config_evaluate) function snd_func_card_inum returned error: No such file or directory
+ALSA lib confmisc.c:422:(snd_func_concat) error evaluating strings
+ALSA lib conf.c:5178:(_snd_config_evaluate) function snd_func_concat returned error: No such file or directory
+ALSA lib confmisc.c:1334:(snd_func_refer) error evaluating name
+ALSA lib conf.c:5178:(_snd_config_evaluate) function snd_func_refer returned error: No such file or directory
+ALSA lib conf.c:5701:(snd_config_expand) Evaluate error: No such file or directory
+ALSA lib pcm.c:2664:(snd_pcm_open_noupdate) Unknown PCM default
+aplay: main:831: audio open error: No such file or directory
+"""
+# ...as the voice reports it (hal.voice.processes.telling_lines).
 NO_CARD = (
     "player exited with 1: ALSA lib confmisc.c:855:(parse_card) cannot find card '0' | "
     "ALSA lib conf.c:5178:(_snd_config_evaluate) function snd_func_card_inum returned error: "

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import errno
+import io
 import json
 import os
 from collections.abc import Callable
@@ -322,3 +323,71 @@ def test_a_hung_voice_keeps_no_gesture_waiting(tmp_path: Path, monkeypatch: pyte
     records = rig.records()
     timed_out = [r for r in records if r["kind"] == "hal" and r.get("status") == "timed_out"]
     assert timed_out and timed_out[0]["error"] == f"no end after {timeout} s"
+
+
+def test_the_real_keyfob_reader_plugged_in_after_the_start_starts_the_session(
+    tmp_path: Path,
+) -> None:
+    """The evdev reader itself (hal.keyfob.reader, real inotify on a directory of device
+    nodes, each a pipe-backed evdev device: there is no /dev/uinput here): nothing at the
+    start, then the node appears, and a long green starts the session with no restart."""
+    from evdev import ecodes
+    from evdev_pipe import PipeBank
+    from fault_rig import RecordedNotifier, write_config
+
+    from hal import Hardware
+    from hal.clock import LoopClock
+    from hal.keyfob.reader import Keyfob
+    from hal.keyfob.settings import KeyfobSettings
+    from hal.servos.sim import SimServos
+    from hal.voice.sim import SimVoice
+    from kasparctl.config import load_config
+    from kasparctl.service.daemon import Daemon, DaemonOptions
+    from kasparctl.service.status import STATUS_WORDS
+    from kasparctl.sim import simtime
+
+    bank = PipeBank(tmp_path / "input")
+    bank.directory.mkdir()
+    config_path = write_config(tmp_path)
+    statuses: list[str] = []
+
+    async def main() -> None:
+        clock = LoopClock()
+        config = load_config(str(config_path))
+        keyfob = Keyfob(
+            KeyfobSettings(device=str(bank.directory / "event7")), clock,
+            opener=bank.open, input_dir=str(bank.directory),
+        )  # fmt: skip
+        changed = asyncio.Event()
+        notifier = RecordedNotifier(changed.set)
+        daemon = Daemon(
+            DaemonOptions(str(config_path), sim=True, state_dir=str(tmp_path / "state")),
+            notifier,
+            hardware=Hardware(SimServos(config.servos, clock), keyfob, SimVoice(io.StringIO(), clock)),
+        )
+        running = asyncio.create_task(daemon.run())
+
+        async def status(wanted: Callable[[str], bool]) -> str:
+            async with asyncio.timeout(60):
+                while not any(wanted(s) for s in notifier.statuses):
+                    changed.clear()
+                    await changed.wait()
+            return next(s for s in notifier.statuses if wanted(s))
+
+        try:
+            absent = await status(lambda s: "keyfob not connected" in s)
+            statuses.append(absent)
+            device = bank.plug("event7")  # plugged in: the node appears
+            await status(lambda s: s == STATUS_WORDS["idle"] and notifier.statuses[-1] == s)
+            device.down(ecodes.KEY_PAGEDOWN)
+            await asyncio.sleep(1.2)  # held: the stimulus itself, in simulated time
+            device.up(ecodes.KEY_PAGEDOWN, gap=1.2)
+            statuses.append(await status(lambda s: s == STATUS_WORDS["placing"]))
+        finally:
+            daemon.request_stop("the test is over")
+            assert await running == 0
+            bank.dispose()
+
+    simtime.run(main(), virtual=True)
+    assert statuses[0].startswith(STATUS_WORDS["idle"]) and "ENOENT" in statuses[0]
+    assert len(list((tmp_path / "state" / "sessions").iterdir())) == 1

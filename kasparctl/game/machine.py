@@ -123,6 +123,8 @@ class HardwareFault:
     kind: FaultSource
     detail: str
     joint: str | None = None
+    # What was raised, when it was (a storage fault's StorageFailed names the file).
+    error: Exception | None = None
 
 
 # What the run loop takes, one at a time.
@@ -179,8 +181,10 @@ class Game:
         While no session is open its records go to `event_log` (with none, they are
         only logged). `startup_faults` happened before the game (a servo that did not
         start, sessions that could not be read): the game begins by stopping for them.
-        `known_problems` are those an earlier game saw and only a success clears (the
-        voice, the disk): shown from the start.
+        `known_problems` are those an earlier game saw that are not over (the keyfob
+        still away, the voice or the disk failing): shown from the start. The keyfob
+        itself reports KeyfobLost when it is not there at its start; an earlier game
+        may have taken that report, hence these.
         """
         self.config = config
         self.settings = config.game
@@ -196,6 +200,7 @@ class Game:
         self._said_in_fault: set[FaultSource] = set()
         self._unwritten: list[tuple[Session | EventLog, Record, float]] = []
         self._storage_fault_queued = False
+        self._storage_failed_in_event_log = False
         self._open_session = open_session
         self.session: Session | None = None
         self.plan: SessionPlan | None = None
@@ -305,8 +310,6 @@ class Game:
         # What went wrong before the game began stops it before a step starts.
         for fault in self._startup_faults:
             await self._on_fault(fault)
-        if not self.hw.keyfob.connected:
-            await self._on_keyfob_lost(KeyfobLost(self._now(), "not connected"))
         if self.stage not in ("paused", "fault"):
             await self._entered()
 
@@ -324,7 +327,7 @@ class Game:
     async def _survive(self, error: Exception, doing: str) -> None:
         """An error escaped while `doing` something: a fault like any other, never the end."""
         if isinstance(error, StorageFailed):
-            fault = HardwareFault(FaultSource.STORAGE, str(error))
+            fault = HardwareFault(FaultSource.STORAGE, str(error), error=error)
         else:
             log.error("software error", doing=doing, exc_info=error)
             fault = HardwareFault(
@@ -416,7 +419,7 @@ class Game:
         except StorageFailed as error:
             if stage == "fault":
                 self._emit(GameEvent.RESUME_REFUSED)
-            await self._on_fault(HardwareFault(FaultSource.STORAGE, str(error)))
+            await self._on_fault(HardwareFault(FaultSource.STORAGE, str(error), error=error))
             return
         if stage == "fault" and key is Confirmation.RESUME:
             self._set_problem(FaultSource.SOFTWARE, None)  # the researcher carries on
@@ -557,7 +560,7 @@ class Game:
         elif isinstance(error, VoiceFailed):
             await self._on_fault(HardwareFault(FaultSource.VOICE, str(error)))
         elif isinstance(error, StorageFailed):
-            await self._on_fault(HardwareFault(FaultSource.STORAGE, str(error)))
+            await self._on_fault(HardwareFault(FaultSource.STORAGE, str(error), error=error))
         elif isinstance(error, HalError):
             await self._on_fault(HardwareFault(FaultSource.SERVO, str(error)))
         else:
@@ -570,6 +573,8 @@ class Game:
         stage = self.stage
         if fault.kind is FaultSource.STORAGE:
             self._storage_fault_queued = False
+            if isinstance(fault.error, StorageFailed):
+                self._storage_failed_in_event_log = fault.error.in_event_log
         # Known before it is recorded: a record that fails for the same disk is not a new fault.
         self._set_problem(fault.kind, _problem(fault), logged=True)
         self._record(
@@ -804,7 +809,10 @@ class Game:
             return None
         self._write_unwritten()
         written = target.record(record, self._now())
-        self._set_problem(FaultSource.STORAGE, None)
+        # Writing works again, where it failed: a session's files show it for both, the
+        # event log only for itself (sessions/ can be broken while the log is not).
+        if isinstance(target, Session) or self._storage_failed_in_event_log:
+            self._set_problem(FaultSource.STORAGE, None)
         return written
 
     def _write_unwritten(self) -> None:
@@ -829,12 +837,13 @@ class Game:
 
     def _storage_failed(self, error: StorageFailed) -> None:
         """A write failed where nothing else stops for it: a storage fault, once per stop."""
+        self._storage_failed_in_event_log = error.in_event_log
         self._set_problem(FaultSource.STORAGE, str(error), logged=True)
         # Once per stop: in the fault stage, or once the session is over, it is said once.
         said = FaultSource.STORAGE in self._said_in_fault and self.stage in ("fault", *ENDS)
         if not (said or self._storage_fault_queued):
             self._storage_fault_queued = True
-            self._inputs.put_nowait(HardwareFault(FaultSource.STORAGE, str(error)))
+            self._inputs.put_nowait(HardwareFault(FaultSource.STORAGE, str(error), error=error))
 
     def _change(self, record: RecordT) -> RecordT:
         """Record, apply, snapshot: the order that makes a crash lose nothing.

@@ -64,10 +64,20 @@ class StorageFailed(SessionError):
     """A record, snapshot or session directory could not be written (the disk full, the
     state directory unwritable); the message names the file and the system's reason."""
 
+    def __init__(self, message: str, path: Path) -> None:
+        """`message` says what failed and why; `path` is what could not be written."""
+        super().__init__(message)
+        self.path = path
+
+    @property
+    def in_event_log(self) -> bool:
+        """Whether the daemon's event log failed (not a session's files)."""
+        return self.path.name == EVENTS_FILE
+
 
 def _storage_failed(path: Path, failed: str, error: OSError) -> StorageFailed:
     reason = error.strerror or str(error)
-    return StorageFailed(f"{path}: {failed}: {reason}")
+    return StorageFailed(f"{path}: {failed}: {reason}", path)
 
 
 def write_atomic(path: Path, data: bytes) -> None:

@@ -289,12 +289,12 @@ class Daemon:
             self._pending_faults.append(HardwareFault(FaultSource.SOFTWARE, detail))
         self._playing = None
         game.flush_unwritten()
-        # Only a line heard or a record written shows these work again: the next game
-        # shows them until then.
+        # Not over with the game: the keyfob still away (its report was this game's),
+        # the voice or the disk until a line is heard or a record written.
         self._carried_problems = {
             kind: detail
             for kind, detail in game.problems.items()
-            if kind in (FaultSource.VOICE, FaultSource.STORAGE)
+            if kind in (FaultSource.KEYFOB, FaultSource.VOICE, FaultSource.STORAGE)
         }
         if game.session is not None:
             game.session.close()
