@@ -273,14 +273,16 @@ class Game:
                     await self._handle(event)
                 except Exception as error:
                     await self._survive(error, _describe(event))
+            # No more keyfob events taken (they stay queued in the keyfob for the next
+            # game); those already taken are still handled.
+            await _cancelled(readers)
             await self._after_the_end()
+            await self.speech.finish()  # what Kaspar says of the end is heard to its end
         finally:
             await self._cancel_step()
             await self.speech.close()
             self.hw.servos.off_fault(self._fault_latched)
-            for task in readers:
-                task.cancel()
-            await asyncio.gather(*readers, return_exceptions=True)
+            await _cancelled(readers)
         return self.stage
 
     def flush_unwritten(self) -> int:
@@ -352,7 +354,7 @@ class Game:
             self._record(HalRecord(event=HalEvent.KEYFOB_BACK, device=event.device))
             self._set_problem(FaultSource.KEYFOB, None)
             self._emit(GameEvent.KEYFOB_BACK)
-            await self.speech.announce("fault.keyfob_back")
+            self.speech.announce_soon("fault.keyfob_back")
 
     async def _on_keyfob_lost(self, event: KeyfobLost) -> None:
         self._record(HalRecord(event=HalEvent.KEYFOB_LOST, reason=event.reason))
@@ -592,13 +594,15 @@ class Game:
             self._said_in_fault = set()
             self._emit(GameEvent.FAULT, kind=fault.kind, detail=fault.detail)
         self._said_in_fault.add(fault.kind)
+        # Said while the game goes on listening: the keyfob coming back, the researcher's
+        # resume or stop are heard before the line ends.
         if fault.kind is FaultSource.SERVO:
             joint = (fault.joint or "a joint").replace("_", " ")
-            await self.speech.announce("fault.servo", joint=joint)
+            self.speech.announce_soon("fault.servo", joint=joint)
         elif fault.kind is FaultSource.KEYFOB:
-            await self.speech.announce("fault.keyfob_lost")
+            self.speech.announce_soon("fault.keyfob_lost")
         else:
-            await self.speech.announce("fault.problem")
+            self.speech.announce_soon("fault.problem")
 
     def _set_problem(self, kind: FaultSource, detail: str | None, logged: bool = False) -> None:
         """`kind` is not working (`detail` says why), or works again (None); listeners are told.
@@ -886,6 +890,12 @@ class Game:
         if self.plan is None:
             raise RuntimeError("no session is open")
         return self.plan
+
+
+async def _cancelled(tasks: list[asyncio.Task[None]]) -> None:
+    for task in tasks:
+        task.cancel()
+    await asyncio.gather(*tasks, return_exceptions=True)
 
 
 def _describe(event: GameInput) -> str:

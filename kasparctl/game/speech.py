@@ -11,7 +11,9 @@ Once a line has failed or timed out the voice counts as failing (`failing`
 holds why) until a line is heard whole again, and `on_health` is told of each
 change. While it fails, `announce` says its line in the background instead of
 waiting for it: the researcher's stop or resume must not wait for a voice that
-hangs until its timeout, or for a player that cannot play.
+hangs until its timeout, or for a player that cannot play. `announce_soon`
+always does: what Kaspar says about a fault must not keep the game from
+hearing the next input (the keyfob back, the researcher's resume) meanwhile.
 """
 
 from __future__ import annotations
@@ -74,6 +76,19 @@ class Speech:
         if self.failing is None:
             await self._speak_quietly(text, key)
             return
+        self._in_background(text, key)
+
+    def announce_soon(self, key: str, **values: str) -> None:
+        """Say a line after what is being said, without waiting for it (never raises for
+        the voice; a bug in picking the line is raised at once)."""
+        self._in_background(self.picker.line(key, **values), key)
+
+    async def finish(self) -> None:
+        """Wait for the lines said in the background (the game is over: let them be heard)."""
+        while self._background:
+            await asyncio.gather(*list(self._background), return_exceptions=True)
+
+    def _in_background(self, text: str, key: str) -> None:
         task = asyncio.get_running_loop().create_task(self._speak_quietly(text, key))
         self._background.add(task)
         task.add_done_callback(self._background.discard)
