@@ -52,6 +52,11 @@ def config_with(tmp_path: Path, extra: str) -> Path:
     return path
 
 
+def quick_speaker(tmp_path: Path) -> Path:
+    """The demo robot, its simulated voice at the fastest rate: the tests wait for its lines."""
+    return config_with(tmp_path, "[voice]\nrate = 450\n")
+
+
 def log_lines(text: str) -> list[dict[str, Any]]:
     return [json.loads(line) for line in text.splitlines() if line.startswith("{")]
 
@@ -71,8 +76,10 @@ def test_keyfob_absent_at_boot_is_shown_and_one_plugged_in_later_starts_the_sess
     keys = tmp_path / "input" / "keyfob"
     keys.parent.mkdir()
 
+    config = quick_speaker(tmp_path)
+
     def command(state_dir: Path) -> list[str]:
-        return run_command(state_dir, extra=("--keys", str(keys)))
+        return run_command(state_dir, config=config, extra=("--keys", str(keys)))
 
     with running_service(tmp_path, command=command) as service:
         service.notify.wait_for("READY=1")
@@ -182,7 +189,12 @@ def test_an_unusable_sessions_directory_is_a_storage_fault_the_researcher_resume
     state_dir = tmp_path / "state"
     state_dir.mkdir()
     (state_dir / "sessions").write_text("")  # in the way: not a directory, even for root
-    with running_service(tmp_path, state_dir=state_dir) as service:
+    config = quick_speaker(tmp_path)
+
+    def command(state_dir: Path) -> list[str]:
+        return run_command(state_dir, config=config)
+
+    with running_service(tmp_path, state_dir=state_dir, command=command) as service:
         service.notify.wait_for("READY=1")
         mark = service.notify.mark()
         service.press("G")
@@ -269,7 +281,12 @@ def reload(pid: int, runtime: Path) -> subprocess.CompletedProcess[str]:
 def test_reload_answers_reloaded_between_sessions_and_fails_when_refused(tmp_path: Path) -> None:
     runtime = tmp_path / "run"
     runtime.mkdir(mode=0o700)
-    with running_service(tmp_path, {"RUNTIME_DIRECTORY": str(runtime)}) as service:
+    config = quick_speaker(tmp_path)
+
+    def command(state_dir: Path) -> list[str]:
+        return run_command(state_dir, config=config)
+
+    with running_service(tmp_path, {"RUNTIME_DIRECTORY": str(runtime)}, command=command) as service:
         service.notify.wait_for("READY=1")
         idle = reload(service.process.pid, runtime)
         assert idle.returncode == 0, idle.stderr
