@@ -391,3 +391,39 @@ def test_the_real_keyfob_reader_plugged_in_after_the_start_starts_the_session(
     simtime.run(main(), virtual=True)
     assert statuses[0].startswith(STATUS_WORDS["idle"]) and "ENOENT" in statuses[0]
     assert len(list((tmp_path / "state" / "sessions").iterdir())) == 1
+
+
+def test_a_session_whose_start_cannot_be_written_is_not_left_half_open(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The disk fills between the session's directory and its first record: no session is
+    left without its start; once the disk takes records, long green opens a whole one."""
+    from kasparctl.game.records import SessionRecord
+    from kasparctl.game.session import Session, StorageFailed
+
+    original = Session.record
+    refused: list[str] = []
+
+    def record(self: Session, record: Any, clock: float) -> Any:
+        if not refused and isinstance(record, SessionRecord):
+            refused.append(self.id)
+            path = self.directory / "records.jsonl"
+            raise StorageFailed(f"{path}: cannot write record 1: No space left on device", path)
+        return original(self, record, clock)
+
+    monkeypatch.setattr(Session, "record", record)
+
+    async def scenario(rig: FaultRig) -> None:
+        await rig.press("long green")
+        await rig.stage_is("fault")
+        assert list((rig.state_dir / "sessions").iterdir()) == []
+        await rig.press("long red")
+        await rig.stage_is("idle")
+        await rig.press("long green")
+        await rig.stage_is("placing")
+
+    rig = run_daemon(tmp_path, monkeypatch, scenario)
+    (records,) = list(rig.session_records())
+    assert (records[0]["kind"], records[0]["event"]) == ("session", "start")
+    faults = [r for r in rig.records() if r["kind"] == "fault"]
+    assert faults[0]["fault"] == "storage" and faults[0]["state"] == "idle"

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import shutil
 from collections.abc import Callable, Coroutine, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar, cast
@@ -434,11 +435,12 @@ class Game:
         if key is Confirmation.STOP:
             # To rest at once, saying goodbye on the way: safety does not wait for words,
             # and a line that fails does not keep Kaspar from resting.
-            said, _ = await asyncio.gather(
+            outcomes = await asyncio.gather(
                 self.speech.announce(f"confirm.{key}"), self._rest_safely(), return_exceptions=True
             )
-            if isinstance(said, Exception):
-                raise said
+            for outcome in outcomes:
+                if isinstance(outcome, BaseException):
+                    raise outcome
         elif key not in SPOKEN_FIRST:
             await self.speech.announce(f"confirm.{key}")
 
@@ -483,10 +485,19 @@ class Game:
         return True
 
     async def _start_session(self) -> None:
-        self.session, self.plan, self.session_state = self._open_session()
-        bind_context(session=self.session.id)
-        self._write(SessionRecord(event=SessionEvent.START, plan=self.session.plan))
-        self._emit(GameEvent.SESSION, session=self.session.id)
+        session, plan, state = self._open_session()
+        try:
+            session.record(SessionRecord(event=SessionEvent.START, plan=session.plan), self._now())
+        except StorageFailed:
+            # A session without its start record is no session: gone, and the next
+            # long green opens a new one once the disk takes records again.
+            session.close()
+            shutil.rmtree(session.directory, ignore_errors=True)
+            raise
+        self.session, self.plan, self.session_state = session, plan, state
+        bind_context(session=session.id)
+        self._set_problem(FaultSource.STORAGE, None)
+        self._emit(GameEvent.SESSION, session=session.id)
 
     # -- entering and leaving states -------------------------------------------
 
