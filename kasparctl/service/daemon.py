@@ -49,7 +49,7 @@ from kasparctl.config import Config, SessionPlan, load_config
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.machine import Game, HardwareFault
-from kasparctl.game.phrases import PhrasePicker, load_phrasebook
+from kasparctl.game.phrases import PhraseBook, PhrasePicker, load_phrasebook
 from kasparctl.game.records import FaultSource
 from kasparctl.game.session import (
     PLAN_FILE,
@@ -125,6 +125,7 @@ class Daemon:
         self._read_again = False
         self._playing: asyncio.Task[str] | None = None
         self._carried_problems: dict[FaultSource, str] = {}
+        self._book: PhraseBook | None = None
 
     def _load(self) -> Config:
         config = load_config(self.options.config_path)
@@ -184,6 +185,8 @@ class Daemon:
         if os.environ.get(DEBUG_BLOCK_ENV):
             # For an engineer to prove the watchdog restarts a hung service.
             loop.add_signal_handler(signal.SIGUSR2, self._block_loop)
+        # Read once (a broken file stops the start, before READY), and again at a reload.
+        self._book = load_phrasebook(self.config.language, self.config.phrases_dir)
         if self.hw is None:
             self.hw = self._build_hardware()
         await self._open_hardware()
@@ -255,8 +258,8 @@ class Daemon:
             fault.kind is FaultSource.STORAGE for fault in self._pending_faults
         )
         faults, self._pending_faults = self._pending_faults, []
-        book = load_phrasebook(self.config.language, self.config.phrases_dir)
-        picker = PhrasePicker(book, np.random.default_rng())
+        assert self._book is not None  # read in _run
+        picker = PhrasePicker(self._book, np.random.default_rng())
         game = Game(
             self.config,
             self.hw,
@@ -386,7 +389,7 @@ class Daemon:
         tokens, self._reload_tokens = self._reload_tokens, []
         try:
             config = self._load()
-            load_phrasebook(config.language, config.phrases_dir)
+            book = load_phrasebook(config.language, config.phrases_dir)
         except Exception as error:  # a bad file must not stop the robot
             log.error("reload failed; keeping the running configuration", error=str(error))
             for token in tokens:
@@ -398,7 +401,7 @@ class Daemon:
                 running=str(self.state_dir),
                 configured=config.state_dir,
             )
-        self.config = config
+        self.config, self._book = config, book
         log.info("configuration reloaded", sessions=len(self.config.sessions))
         for token in tokens:
             self._reload_desk.answer(token, Outcome.RELOADED)
