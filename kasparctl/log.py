@@ -8,7 +8,10 @@ Under systemd each JSON line starts with its syslog priority, "<4>" for a
 warning (sd-daemon(3)): journald reads that prefix on a stream line
 (SyslogLevelPrefix=, on by default), stores the line at that priority without
 the prefix, so `journalctl -u kasparctl -p warning` shows the warnings and
-errors and MESSAGE is the JSON object alone. The prefix is written only when
+errors and MESSAGE is the JSON object alone. Warnings and errors of the standard
+library's logging (asyncio's "Task exception was never retrieved", a library's
+warning) go the same way, as structlog lines of their own level, rather than
+as bare text on stderr that journald would keep at info. The prefix is written only when
 the stream is the journal's (the JOURNAL_STREAM systemd sets names its device
 and inode); anywhere else the lines are plain JSON. journald's native protocol
 would carry fields too, but needs its socket and a second path for the lines
@@ -95,6 +98,7 @@ def configure_logging(
     prefixed = connected_to_journal(stream) if journal is None else journal
     if prefixed and use_json:
         renderer = JournalPriority(renderer)
+    _forward_standard_logging()
     structlog.configure(
         processors=[
             structlog.contextvars.merge_contextvars,
@@ -109,6 +113,30 @@ def configure_logging(
         # Caching would freeze the first configuration; tests reconfigure.
         cache_logger_on_first_use=False,
     )
+
+
+class _ToStructlog(logging.Handler):
+    """The standard library's log records as structlog lines of the same level."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        """Log `record` through structlog, with its logger's name and any exception."""
+        level = record.levelname.lower()
+        method = level if level in ("debug", "info", "warning", "error", "critical") else "error"
+        try:
+            message = record.getMessage()
+        except (TypeError, ValueError):  # a record whose arguments do not fit its format
+            message = str(record.msg)
+        logger = structlog.get_logger(record.name)
+        getattr(logger, method)(message, logger=record.name, exc_info=record.exc_info or None)
+
+
+def _forward_standard_logging() -> None:
+    root = logging.getLogger()
+    if not any(isinstance(handler, _ToStructlog) for handler in root.handlers):
+        handler = _ToStructlog(level=logging.WARNING)
+        root.addHandler(handler)
+    if root.level > logging.WARNING or root.level == logging.NOTSET:
+        root.setLevel(logging.WARNING)
 
 
 def bind_context(**context: object) -> None:

@@ -278,6 +278,20 @@ def test_lines_carry_their_priority_only_on_the_journals_stream(tmp_path: Path) 
     assert JournalPriority(lambda *_: "x")(None, "info", {"level": "nonsense"}) == "<6>x"
 
 
+def test_the_standard_librarys_warnings_and_errors_keep_their_level() -> None:
+    import logging
+
+    stream = io.StringIO()
+    configure_logging("info", "json", stream, journal=True)
+    logging.getLogger("asyncio").error("Task exception was never retrieved")
+    logging.getLogger("transitions").warning("a warning")
+    logging.getLogger("quiet").info("not forwarded: below warning")
+    lines = stream.getvalue().splitlines()
+    assert [line[:3] for line in lines] == ["<3>", "<4>"]
+    assert json.loads(lines[0][3:])["event"] == "Task exception was never retrieved"
+    assert json.loads(lines[1][3:])["logger"] == "transitions"
+
+
 # -- STATUS= ------------------------------------------------------------------------------------
 
 
