@@ -57,7 +57,7 @@ def build(
     if sim or voice.backend == "sim":
         from hal.voice.sim import SimVoice
 
-        built_voice: VoiceOutput = SimVoice(sim_lines or sys.stderr, clock)
+        built_voice: VoiceOutput = SimVoice(sim_lines or sys.stderr, clock, rate=voice.rate)
     else:
         from hal.voice.speaker import Voice
 

@@ -19,6 +19,7 @@ COMMAND_MODULES = (
     "simulate",
     "demo",
     "run",
+    "reload",
     "install",
     "servos",
     "pose",

@@ -30,18 +30,22 @@ DEADLINE_S = 30.0  # bounds a failure only: a healthy service is far quicker
 POLL_S = 0.005  # how often a file on disk is looked at while waiting for a record
 
 
-def run_command(state_dir: Path) -> list[str]:
-    """The service on the demo robot's simulated hardware, keeping its sessions in state_dir."""
+def run_command(
+    state_dir: Path, config: Path = DEMO_CONFIG, sim: bool = True, extra: tuple[str, ...] = ()
+) -> list[str]:
+    """The service on the demo robot's simulated hardware (or as `config` says, without
+    `sim`), keeping its sessions in state_dir."""
     return [
         sys.executable,
         "-m",
         "kasparctl",
         "run",
-        "--sim",
+        *(["--sim"] if sim else []),
         "--config",
-        str(DEMO_CONFIG),
+        str(config),
         "--state-dir",
         str(state_dir),
+        *extra,
     ]
 
 
@@ -98,6 +102,24 @@ class NotifyListener:
                 return message
         recent = [m for _, m in self.messages][-10:]
         raise AssertionError(f"{field} never arrived within {seconds} s; last: {recent}")
+
+    def wait_for_status(
+        self, wanted: Callable[[str], bool], seconds: float = DEADLINE_S, since: int = 0
+    ) -> str:
+        """The first STATUS= text (from mark `since` on) for which wanted(text) is true."""
+        checked = since
+        end = time.monotonic() + seconds
+        while True:
+            for _, seen in self.messages[checked:]:
+                for field in seen.split("\n"):
+                    if field.startswith("STATUS=") and wanted(field.removeprefix("STATUS=")):
+                        return field.removeprefix("STATUS=")
+            checked = len(self.messages)
+            left = end - time.monotonic()
+            if left <= 0:
+                statuses = [m for _, m in self.messages if "STATUS=" in m][-5:]
+                raise AssertionError(f"no such STATUS= within {seconds} s; last: {statuses}")
+            self._receive(left)
 
     def close(self) -> None:
         """Closes the socket and removes its path, so the next run can bind it again."""
@@ -213,10 +235,14 @@ class RunningService:
 
 @contextlib.contextmanager
 def running_service(
-    directory: Path, environment: dict[str, str] | None = None, state_dir: Path | None = None
+    directory: Path,
+    environment: dict[str, str] | None = None,
+    state_dir: Path | None = None,
+    command: Callable[[Path], list[str]] = run_command,
 ) -> Iterator[RunningService]:
     """The service started as systemd would (NOTIFY_SOCKET; sessions in state_dir, by
-    default directory/state); killed at the end if it is still running."""
+    default directory/state; `command` of the state dir, run_command's by default);
+    killed at the end if it is still running."""
     notify_path = directory / "notify.sock"
     listener = NotifyListener(notify_path)
     env = os.environ | {"NOTIFY_SOCKET": str(notify_path)}
@@ -225,7 +251,7 @@ def running_service(
     env |= environment or {}
     state_dir = state_dir or directory / "state"
     process = subprocess.Popen(
-        run_command(state_dir),
+        command(state_dir),
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import os
 import re
 import signal
@@ -32,6 +33,7 @@ from array import array
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 from boot.machine import (
@@ -72,7 +74,9 @@ INSTALLED = {
     "the sysusers file": "test -e /etc/sysusers.d/kasparctl.conf",
     "the udev rules": "test -e /etc/udev/rules.d/99-kaspar-serial.rules",
 }
-SESSION_PATH = re.compile(r"sessions(/[^/]+(/(plan\.json|state\.json|records\.jsonl(\.torn)?))?)?")
+SESSION_PATH = re.compile(
+    r"sessions(/[^/]+(/(plan\.json|state\.json|records\.jsonl(\.torn)?))?)?|events\.jsonl(\.torn)?"
+)
 
 
 # -- the install script on this machine (no container) ------------------------------------
@@ -281,10 +285,13 @@ def report(request: pytest.FixtureRequest, robot: Robot) -> None:
     line = (
         f"boot test: start to READY {seconds('ready', 2)}, stop {seconds('stop', 2)}, "
         f"watchdog restart {seconds('watchdog restart')} (SIGSTOP to READY, "
-        f"{seconds('restart after timeout')} of it after the timeout); "
+        f"{seconds('restart after timeout')} of it after the timeout), "
+        f"a keyfob plugged in late found in {seconds('keyfob found', 2)}; "
         f"boot {seconds('boot')}, install {seconds('install')}, "
         f"{cache or 'trees from the cache'}"
     )
+    if "no sound card" in robot.story:
+        line += f"; without a sound card the player said first: {robot.story['no sound card']!r}"
     plugins = request.config.pluginmanager
     reporter, capture = plugins.get_plugin("terminalreporter"), plugins.get_plugin("capturemanager")
     if reporter is None or capture is None:
@@ -438,22 +445,47 @@ def session_dirs(robot: Robot) -> list[str]:
     return result.stdout.split()
 
 
+def test_reload_between_sessions_succeeds(robot: Robot) -> None:
+    pid = robot.main_pid()
+    result = robot.machine.run(["systemctl", "reload", UNIT], check=False)
+    assert result.returncode == 0, result.stdout + result.stderr
+    robot.wait_for("the reload", lambda: "configuration reloaded" in robot.log_events())
+    assert robot.main_pid() == pid
+    robot.wait_for_status(IDLE)
+
+
 def test_long_green_starts_a_session(robot: Robot) -> None:
     robot.press("G")
     robot.wait_for_status(PLACING)
     assert len(session_dirs(robot)) == 1
 
 
-def test_reload_is_refused_mid_session(robot: Robot) -> None:
+def test_reload_is_refused_mid_session_and_systemctl_reload_fails(robot: Robot) -> None:
     pid = robot.main_pid()
-    robot.systemctl("reload", UNIT)  # ExecReload= delivers SIGHUP
+    # ExecReload= (kasparctl reload) sends SIGHUP and waits for the daemon's answer.
+    result = robot.machine.run(["systemctl", "reload", UNIT], check=False)
+    assert result.returncode != 0, result.stdout
+    assert f"Job for {UNIT} failed" in result.stderr, result.stderr
+    assert any(event.startswith("reload refused") for event in robot.log_events())
+    said = [str(e.get("MESSAGE")) for e in robot.journal()]
+    assert any(m.startswith("kasparctl reload: reload refused: a session is running") for m in said)
+    p = robot.show("MainPID", "ActiveState", "StatusText")
+    assert (int(p["MainPID"]), p["ActiveState"], p["StatusText"]) == (pid, "active", PLACING)
 
-    def refused() -> bool:
-        return any(event.startswith("reload refused") for event in robot.log_events())
 
-    robot.wait_for("the daemon refusing the reload", refused, timeout=10)
-    assert robot.main_pid() == pid
-    assert robot.show("StatusText")["StatusText"] == PLACING
+def test_the_journal_keeps_each_lines_priority(robot: Robot) -> None:
+    # journald took each line's "<N>" (SyslogLevelPrefix=): -p warning shows the refused
+    # reload, and no line logged at info.
+    warnings = robot.journal(priority="warning")
+    logged = [e["log"] for e in warnings if isinstance(e.get("log"), dict)]
+    assert any(line["event"].startswith("reload refused") for line in logged), logged
+    assert {line["level"] for line in logged} <= {"warning", "error", "critical"}, logged
+    assert all(int(e["PRIORITY"]) <= 4 for e in warnings)
+    everything = robot.journal()
+    ready = [e for e in everything if isinstance(e.get("log"), dict) and e["log"]["event"] == "ready"]
+    assert ready and {e["PRIORITY"] for e in ready} == {"6"}
+    refused = [e for e in everything if str(e.get("MESSAGE")).startswith("kasparctl reload: reload")]
+    assert refused and refused[-1]["PRIORITY"] == "3"
 
 
 def test_the_watchdog_restarts_a_stopped_daemon_and_the_session_resumes(robot: Robot) -> None:
@@ -540,3 +572,102 @@ def test_installing_again_resumes_the_kept_session(robot: Robot) -> None:
     assert session_dirs(robot) == sessions
     owners = robot.machine.run(["find", STATE_DIR, "-printf", "%u %g\n"]).stdout.split("\n")
     assert set(filter(None, owners)) == {"kaspar kaspar"}  # handed to the new user
+
+
+# -- faults on the robot -------------------------------------------------------------------------
+
+NOSOUND_CONFIG = "/etc/kaspar/nosound.toml"
+LATE_KEYFOB = "/run/kaspar/keyfob"
+
+
+def session_records(robot: Robot) -> list[dict[str, Any]]:
+    """The records of the newest session."""
+    newest = sorted(session_dirs(robot))[-1]
+    text = robot.machine.read_bytes(f"{STATE_DIR}/sessions/{newest}/records.jsonl").decode()
+    return [json.loads(line) for line in text.splitlines()]
+
+
+def test_stop_ends_the_resumed_session(robot: Robot) -> None:
+    robot.press("b")  # both: stop
+    robot.wait_for_status(IDLE)
+    assert [r["to"] for r in session_records(robot) if r["kind"] == "step"][-1] == "stopped"
+
+
+def test_no_sound_card_the_session_runs_is_recorded_and_stops(robot: Robot) -> None:
+    """The real voice (espeak-ng into aplay) in the unit's sandbox, on a machine with no
+    sound card: the simulated robot and keyfob of the demo, sessions in the state dir."""
+    demo = robot.machine.read_bytes(f"{CHECKOUT}/kasparctl/sim/demo.toml").decode()
+    config = demo.replace('level = "warning"', 'level = "info"') + '\n[keyfob]\nbackend = "sim"\n'
+    robot.machine.write(NOSOUND_CONFIG, config, mode=0o640)
+    robot.machine.run(["chgrp", "kaspar", NOSOUND_CONFIG])
+    robot.override(
+        "nosound",
+        "[Service]\nExecStart=\n"
+        f"ExecStart=/opt/kasparctl/bin/kasparctl run --config {NOSOUND_CONFIG} --state-dir {STATE_DIR}\n",
+    )
+    try:
+        robot.systemctl("restart", UNIT)
+        robot.wait_for_status_where("idle", lambda text: text.startswith(IDLE))
+        before = session_dirs(robot)
+        robot.press("G")
+        status = robot.wait_for_status_where(
+            "a voice fault", lambda text: text.startswith("fault") and "voice failing" in text
+        )
+        assert robot.show("ActiveState")["ActiveState"] == "active"
+        assert len(session_dirs(robot)) == len(before) + 1  # the session is written
+        records = session_records(robot)
+        unheard = [r for r in records if r["kind"] == "hal" and r["event"] == "voice"]
+        assert unheard and unheard[0]["status"] == "failed", records
+        # aplay's first line (its cause) is kept, as aplay says it in the same sandbox.
+        _, aplay = robot.probe(["sh", "-c", "aplay -q /dev/zero 2>&1 >/dev/null | head -n 1"])
+        first = aplay.strip().splitlines()[0]
+        assert first and first in unheard[0]["error"], (first, unheard[0]["error"])
+        assert first[:60] in status
+        faults = [r for r in records if r["kind"] == "fault"]
+        assert faults and faults[0]["fault"] == "voice", records
+        errors = [e["log"] for e in robot.journal(priority="err") if isinstance(e.get("log"), dict)]
+        assert any(line["event"] == "fault" and line["fault"] == "voice" for line in errors)
+        robot.story["no sound card"] = first
+        # Stop, without sound.
+        robot.press("b")
+        robot.wait_for_status_where("idle again", lambda text: text.startswith(IDLE))
+        assert [r["to"] for r in session_records(robot) if r["kind"] == "step"][-1] == "stopped"
+    finally:
+        robot.override("nosound", None)
+
+
+def test_the_keyfob_absent_at_start_starts_the_session_once_plugged_in(robot: Robot) -> None:
+    """The simulated keyfob's keys from a fifo in the runtime directory, which is emptied
+    at every start: not there when the service starts, created later by the test (as
+    udev makes a keyfob's node); the service watches for it with inotify, in its sandbox."""
+    robot.override(
+        "late-keyfob",
+        "[Service]\nExecStart=\n"
+        f"ExecStart=/opt/kasparctl/bin/kasparctl run --sim --config {CONFIG} --keys {LATE_KEYFOB}\n",
+    )
+    try:
+        robot.systemctl("restart", UNIT)
+        invocation = robot.show("InvocationID")["InvocationID"]
+        status = robot.wait_for_status_where("no keyfob", lambda text: "keyfob not connected" in text)
+        assert status.startswith(IDLE) and "not available at start" in status, status
+        warnings = robot.journal(priority="warning", invocation=invocation)
+        assert any(
+            isinstance(e.get("log"), dict) and e["log"]["event"] == "keyfob not connected; watching for it"
+            for e in warnings
+        )
+        plugged = time.monotonic()
+        robot.machine.run(["sh", "-c", f"mkfifo -m 0600 {LATE_KEYFOB} && chown kaspar:kaspar {LATE_KEYFOB}"])
+        robot.wait_for_status(IDLE)
+        robot.timings["keyfob found"] = time.monotonic() - plugged
+        found = [
+            (e["PRIORITY"], e["log"]) for e in robot.journal(invocation=invocation)
+            if isinstance(e.get("log"), dict) and e["log"]["event"] not in ("ready",)
+        ]  # fmt: skip
+        assert robot.timings["keyfob found"] < 2.0, found  # inotify, not the 5 s look-again
+        robot.machine.run(["sh", "-c", f"printf G > {LATE_KEYFOB}"])  # long green, no restart
+        robot.wait_for_status(PLACING)
+        assert robot.show("InvocationID")["InvocationID"] == invocation
+    finally:
+        robot.override("late-keyfob", None)
+        robot.systemctl("stop", UNIT)
+

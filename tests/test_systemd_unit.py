@@ -10,7 +10,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 UNIT = REPO / "systemd" / "kasparctl.service"
-EXPOSURE_LIMIT = 2.0
+# systemd-analyze security rates the unit 0.7 ("SAFE"); a change that exposes more fails.
+EXPOSURE_LIMIT = 0.7
 
 
 def unit_for_this_machine(tmp_path: Path) -> Path:
@@ -39,7 +40,7 @@ def test_systemd_analyze_verify_says_nothing(tmp_path: Path) -> None:
     assert result.stderr == "" and result.returncode == 0, result.stderr
 
 
-def test_security_exposure_is_at_most_two(tmp_path: Path) -> None:
+def test_security_exposure_is_at_most_0_7(tmp_path: Path) -> None:
     result = subprocess.run(
         [
             systemd_analyze(),
@@ -72,6 +73,9 @@ def test_unit_keeps_what_the_robot_needs() -> None:
         "PrivateNetwork=yes",
         "SystemCallFilter=@system-service",
         "StartLimitBurst=",
+        # systemctl reload fails when the daemon refuses (kasparctl.service.reload).
+        "ExecReload=/opt/kasparctl/bin/kasparctl reload --pid $MAINPID",
+        "SyslogLevelPrefix=yes",
     ):
         assert line in text, line
 

@@ -165,7 +165,11 @@ class Keyfob:
         try:
             self._open()
         except (OSError, KeyfobError) as error:
-            self._report_lost(f"not available at start: {_describe(error)}")
+            # Said once here: a Bluetooth keyfob pairs after the computer starts, a USB
+            # one is plugged in late; the watch below finds it when it comes.
+            reason = f"not available at start: {_describe(error)}"
+            log.warning("keyfob not connected; watching for it", reason=reason)
+            self._report_lost(reason)
 
     async def next_event(self) -> InputEvent:
         """The next gesture or lost/back event, in order; waits as long as it takes."""
@@ -379,6 +383,7 @@ class DirectoryWatch:
     def __init__(self, directories: Iterable[str]) -> None:
         """Watch `directories` once entered (on the running loop); missing ones are added later."""
         self._directories = list(directories)
+        self._unwatchable: set[str] = set()
         self._libc: Any = None
         self._fd = -1
         self._changed: asyncio.Event | None = None
@@ -411,7 +416,13 @@ class DirectoryWatch:
     def _add_watches(self) -> None:
         for directory in self._directories:
             # Adding an existing watch again is harmless: inotify returns the same one.
-            self._libc.inotify_add_watch(self._fd, os.fsencode(directory), self._MASK)
+            if self._libc.inotify_add_watch(self._fd, os.fsencode(directory), self._MASK) < 0:
+                error = ctypes.get_errno()
+                if error != errno.ENOENT and directory not in self._unwatchable:
+                    # Only the periodic look finds the keyfob there: say why, once.
+                    self._unwatchable.add(directory)
+                    log.warning("cannot watch for the keyfob", directory=directory,
+                                error=os.strerror(error))  # fmt: skip
 
     def _on_readable(self) -> None:
         try:

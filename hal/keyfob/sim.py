@@ -14,8 +14,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import stat
 import sys
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Any, TextIO, TypedDict, Unpack
 
 import structlog
@@ -309,3 +311,108 @@ class TerminalKeyfob(SimKeyfob):
 
             termios.tcsetattr(fd, termios.TCSADRAIN, self._saved_mode)
             self._saved_mode = None
+
+
+class FifoKeyfob(SimKeyfob):
+    """The terminal keyfob's keys read from a fifo that may come late, go, and come back.
+
+    For the service on simulated hardware (`kasparctl run --sim --keys PATH`), where
+    a keyfob that pairs or is plugged in after the start is to be shown honestly:
+    the fifo missing at start is KeyfobLost("not available at start: ..."), its
+    directory is watched with inotify (as the real reader watches /dev/input), and
+    KeyfobBack comes when it appears; removing it is an unplug. It is opened
+    read-write, so a writer coming and going is never an end of file.
+    """
+
+    def __init__(
+        self,
+        path: str,
+        clock: Clock,
+        *,
+        retry_every: float = 5.0,
+        **options: Unpack[SimKeyfobOptions],
+    ) -> None:
+        """Keys from the fifo at `path` once started; looked for again every `retry_every` s."""
+        super().__init__(clock, **options)
+        self._path = path
+        self._retry_every = retry_every
+        self._connected = False
+        self._fd = -1
+        self._pending: asyncio.Queue[str] = asyncio.Queue()
+        self._tasks: list[asyncio.Task[None]] = []
+
+    async def start(self) -> None:
+        """Open the fifo if it is there, else report it lost; watch it either way."""
+        loop = asyncio.get_running_loop()
+        self._tasks = [loop.create_task(self._watch()), loop.create_task(self._perform_keys())]
+
+    async def close(self) -> None:
+        """Stop watching and reading; close the fifo."""
+        await super().close()
+        for task in self._tasks:
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        self._drop()
+
+    async def _watch(self) -> None:
+        from hal.keyfob.reader import DirectoryWatch  # inotify, shared with the real reader
+
+        first = True
+        with DirectoryWatch([str(Path(self._path).parent)]) as watch:
+            while not self._closed:
+                if self._fd < 0:
+                    try:
+                        self._open()
+                    except OSError as error:
+                        if first:
+                            reason = f"not available at start: {error.strerror or error}"
+                            log.warning("keyfob not connected; watching for it", reason=reason)
+                            self._lost(reason)
+                    else:
+                        log.info("keyfob open", device=self._path)
+                        if not first:
+                            self._events.put_nowait(KeyfobBack(self._clock.now(), self._path))
+                elif not os.path.exists(self._path):
+                    log.warning("keyfob lost", reason="removed")
+                    self._drop()
+                    self._lost("removed")
+                first = False
+                await watch.changed(self._retry_every)
+
+    def _open(self) -> None:
+        fd = os.open(self._path, os.O_RDWR | os.O_NONBLOCK | os.O_CLOEXEC)
+        try:
+            if not stat.S_ISFIFO(os.fstat(fd).st_mode):
+                raise OSError(f"{self._path} is not a fifo")
+            asyncio.get_running_loop().add_reader(fd, self._on_keys)
+        except BaseException:
+            os.close(fd)
+            raise
+        self._fd = fd
+        self._connected = True
+
+    def _drop(self) -> None:
+        if self._fd >= 0:
+            with contextlib.suppress(RuntimeError):  # the loop may already be closed
+                asyncio.get_running_loop().remove_reader(self._fd)
+            os.close(self._fd)
+            self._fd = -1
+
+    def _lost(self, reason: str) -> None:
+        self._connected = False
+        self._publish(self._recogniser.reset())
+        self._events.put_nowait(KeyfobLost(at=self._clock.now(), reason=reason))
+
+    def _on_keys(self) -> None:
+        try:
+            data = os.read(self._fd, 64).decode(errors="ignore")
+        except BlockingIOError:
+            return
+        for char in data:
+            action = TERMINAL_KEYS.get(char)
+            if action is not None and action not in ("lost", "back"):
+                self._pending.put_nowait(action)
+
+    async def _perform_keys(self) -> None:
+        while True:
+            await self.perform(await self._pending.get())

@@ -3,6 +3,11 @@
 Standard output carries the JSON log lines, so no child may write there. A
 child still running when its utterance ends (timed out, cancelled) is killed
 and waited for, so none outlives the utterance or is left as a zombie.
+
+A child that fails is reported with its telling lines: the first ones and
+the last ones of its stderr, bounded. aplay without a sound card writes the
+cause first ("cannot find card '0'") and eight lines of consequences after
+it; the end alone would hide it.
 """
 
 from __future__ import annotations
@@ -38,13 +43,36 @@ async def spawn(
 async def finish(process: asyncio.subprocess.Process, what: str, text: bytes | None) -> None:
     """Write `text` to the process's stdin (if given) and wait for it to end.
 
-    Raises VoiceError naming `what` with the exit status and the end of its
-    stderr when it exits non-zero.
+    Raises VoiceError naming `what` with the exit status and the telling lines
+    of its stderr (telling_lines) when it exits non-zero.
     """
     _, errors = await process.communicate(text)
     if process.returncode != 0:
-        detail = errors.decode(errors="replace").strip()[-300:]
+        detail = telling_lines(errors.decode(errors="replace"))
         raise VoiceError(f"{what} exited with {process.returncode}: {detail}")
+
+
+# How much of a failed child's stderr is kept: its first lines (where the cause is
+# said), its last lines (where the program sums up), each cut to a width.
+HEAD_LINES = 3
+TAIL_LINES = 2
+LINE_WIDTH = 160
+
+
+def telling_lines(
+    stderr: str, head: int = HEAD_LINES, tail: int = TAIL_LINES, width: int = LINE_WIDTH
+) -> str:
+    """The first `head` and last `tail` non-blank lines of `stderr`, joined with " | ".
+
+    Lines left out in between are counted ("... 4 more lines ..."); a line
+    longer than `width` characters is cut with "...". The result is at most
+    (head + tail + 1) lines of `width`, however much the program wrote.
+    """
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
+    if len(lines) > head + tail:
+        left_out = len(lines) - head - tail
+        lines = [*lines[:head], f"... {left_out} more lines ...", *lines[len(lines) - tail :]]
+    return " | ".join(line if len(line) <= width else line[: width - 3] + "..." for line in lines)
 
 
 async def run(argv: list[str], what: str) -> None:

@@ -2,13 +2,18 @@
 
 Optionally it also speaks (or writes WAV files) through a real voice, e.g.
 hal.voice.speaker.Voice with engine "espeak-ng", so the demo can be heard.
+
+Faults can be injected as the real voice has them: a player that fails at
+once (no sound card: every line FAILED with the player's error, the line
+being said cut), or one that hangs (every line TIMED_OUT after the voice's
+timeout, as hal.voice.speaker.Voice reports a hung engine).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import TextIO
 
 from hal.clock import Clock
@@ -34,11 +39,13 @@ class SimVoice:
         also: VoiceOutput | None = None,
         prefix: str = "Kaspar",
         clips: Mapping[str, str] | None = None,
+        timeout: float = 20.0,
     ) -> None:
         """Print each line to `stream` as it would be spoken at `rate` words per minute.
 
         `also` is a real voice that speaks (or writes) each line too; `prefix` names
-        the speaker in the printed line; a phrase key in `clips` is marked as a clip.
+        the speaker in the printed line; a phrase key in `clips` is marked as a clip;
+        `timeout` is how long a hung line takes to time out (see inject_fault).
         """
         self._stream = stream
         self._clock = clock
@@ -50,7 +57,19 @@ class SimVoice:
         self._current: asyncio.Task[None] | None = None
         self._cancelled_at = 0  # lines queued before the last cancel() are dropped
         self._serial = 0
+        self._timeout = timeout
+        self._failure: str | None = None
+        self._hangs = False
         self.lines: list[Spoken] = []
+        # Called with each line's text as Kaspar starts to say it (a test waits on it).
+        self.on_line: Callable[[str], None] | None = None
+
+    def inject_fault(self, error: str | None, *, hang: bool = False) -> None:
+        """From now on every line fails with `error` (the line being said ends at once);
+        with `hang`, every line times out instead; None: the voice works again."""
+        self._failure, self._hangs = error, hang and error is not None
+        if error is not None and not hang and self._current is not None:
+            self._current.cancel()  # the player died mid-line
 
     async def say(self, text: str, key: str | None = None) -> Spoken:
         """Print the line, then wait on the clock as long as it takes to say.
@@ -64,11 +83,17 @@ class SimVoice:
             started = self._clock.now()
             if serial <= self._cancelled_at:
                 return self._record(SpokenStatus.CANCELLED, text, started)
+            if self._failure is not None and not self._hangs:
+                return self._record(SpokenStatus.FAILED, text, started, self._failure)
             # The game names every line's phrase key; only a configured clip replaces TTS.
             clip = f" [clip {key}]" if key is not None and key in self._clips else ""
-            self._stream.write(f"[{started:10.3f}] {self._prefix}: {text}{clip}\n")
-            self._stream.flush()
-            self._current = asyncio.get_running_loop().create_task(self._speak(text, key))
+            hung = self._hangs
+            if not hung:
+                self._stream.write(f"[{started:10.3f}] {self._prefix}: {text}{clip}\n")
+                self._stream.flush()
+                if self.on_line is not None:
+                    self.on_line(text)
+            self._current = asyncio.get_running_loop().create_task(self._speak(text, key, hung))
             try:
                 await asyncio.wait({self._current})
             finally:
@@ -77,10 +102,19 @@ class SimVoice:
                     await asyncio.wait({self._current})
             cancelled = self._current.cancelled()
             self._current = None
+        if hung and not cancelled:
+            return self._record(
+                SpokenStatus.TIMED_OUT, text, started, f"no end after {self._timeout} s"
+            )
+        if cancelled and self._failure is not None and not self._hangs:
+            return self._record(SpokenStatus.FAILED, text, started, self._failure)
         status = SpokenStatus.CANCELLED if cancelled else SpokenStatus.FINISHED
         return self._record(status, text, started)
 
-    async def _speak(self, text: str, key: str | None) -> None:
+    async def _speak(self, text: str, key: str | None, hung: bool = False) -> None:
+        if hung:
+            await self._clock.sleep(self._timeout)
+            return
         waits = [self._clock.sleep(speaking_time(text, self._rate))]
         if self._also is not None:
             waits.append(self._also_say(text, key))
@@ -94,8 +128,11 @@ class SimVoice:
             self._also.cancel()
             raise
 
-    def _record(self, status: SpokenStatus, text: str, started: float) -> Spoken:
-        spoken = Spoken(status, text, "sim", started, self._clock.now())
+    def _record(
+        self, status: SpokenStatus, text: str, started: float, error: str | None = None
+    ) -> Spoken:
+        via = None if status is SpokenStatus.FAILED else "sim"
+        spoken = Spoken(status, text, via, started, self._clock.now(), error=error)
         self.lines.append(spoken)
         return spoken
 

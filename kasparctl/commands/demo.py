@@ -3,6 +3,8 @@
 Kaspar's lines, the children's presses and the robot's movements are printed
 as they happen, each with its clock time. Everything is recorded in a state
 directory, exactly as on the robot; an unfinished session there is resumed.
+The demo is that directory's one writer while it runs: a state directory in use
+(by the service, or another demo) is refused at once.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from kasparctl.config import Config, ConfigError, load_config
+from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.phrases import PhraseError
 from kasparctl.game.session import SessionError
 from kasparctl.learning.learner import LearnerError
@@ -97,6 +100,15 @@ def run(arguments: argparse.Namespace) -> int:
     options = DemoOptions(
         state_dir=state_dir, seed=seed, teacher=teacher, interactive=arguments.interactive
     )
+    lock = StateDirLock(state_dir)
+    try:
+        lock.acquire()
+    except StateDirBusy as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    except OSError as error:
+        print(f"error: {state_dir}: cannot use the state directory: {error}", file=sys.stderr)
+        return 1
     try:
         if view:
             result = _with_view(config, options, arguments.speed)
@@ -106,6 +118,7 @@ def run(arguments: argparse.Namespace) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 1
     finally:
+        lock.release()
         sys.stderr.write(held_logs.getvalue())
     print(
         f"\n{result.trials} guesses, {result.learned} toys learned, session {result.session} "

@@ -7,6 +7,7 @@ import sys
 from typing import Any
 
 from kasparctl.config import ConfigError, default_config_path
+from kasparctl.game.lock import StateDirBusy
 from kasparctl.game.phrases import PhraseError
 from kasparctl.service.daemon import DaemonOptions, run_daemon
 
@@ -22,19 +23,32 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--sim", action="store_true", help="simulated hardware throughout (keys on standard input)"
     )
+    parser.add_argument(
+        "--keys",
+        default=None,
+        metavar="FIFO",
+        help="with --sim: the keyfob's keys from this fifo instead of standard input; "
+        "it may appear after the start (a keyfob plugged in late) and go again",
+    )
     parser.add_argument("--state-dir", default=None, help="overrides the configured state_dir")
     parser.set_defaults(run=run)
 
 
 def run(arguments: argparse.Namespace) -> int:
-    """Run the daemon until it is stopped; 1 when the configuration or phrases are unusable."""
+    """Run the daemon until it is stopped; 1 when the configuration or phrases are unusable,
+    or when another process already writes to the state directory."""
+    if arguments.keys is not None and not arguments.sim:
+        print("error: --keys: only with --sim (the real keyfob is configured in [keyfob])",
+              file=sys.stderr)  # fmt: skip
+        return 1
     options = DaemonOptions(
         config_path=arguments.config or default_config_path(),
         sim=arguments.sim,
         state_dir=arguments.state_dir,
+        keys=arguments.keys,
     )
     try:
         return run_daemon(options)
-    except (ConfigError, PhraseError) as error:
+    except (ConfigError, PhraseError, StateDirBusy) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1

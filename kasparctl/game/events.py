@@ -2,7 +2,8 @@
 the simulated children and the tests all follow the game through these events.
 
 A listener is called synchronously with the event and a dict of details; it
-must not block (it runs on the game's own task).
+must not block (it runs on the game's own task). A listener that raises is
+logged and left out of that event: it never stops the game.
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ class GameEvent(enum.StrEnum):
     FAULT = "fault"  # kind: the FaultSource that stopped the game
     KEYFOB_BACK = "keyfob_back"  # (none): the keyfob is read again
     RESUME_REFUSED = "resume_refused"  # (none): a resume from a fault failed to rearm
+    # problems: FaultSource -> detail, every part that is not working now (empty: all well);
+    # sent whenever it changes (the daemon's STATUS= shows it)
+    PROBLEMS = "problems"
 
 
 Listener = Callable[[GameEvent, dict[str, Any]], None]

@@ -12,6 +12,16 @@ Every change is a record first (fsynced), then applied to GameState, then
 snapshotted; only then does Kaspar react. The game sees the hardware only
 through the hal interfaces, and the learner never sees the answer key.
 
+Faults, in every stage: a part that fails (a servo, the bus, the keyfob, the
+voice, the disk) or a bug (an error in a step, or in handling an input) is
+recorded (in the session, or in the daemon's event log when none is open),
+logged at its level, kept in `problems` (the daemon's STATUS= shows them) and
+said where the voice still works; a running step stops (the fault stage), and
+the researcher's resume or stop still work. Nothing the run loop does can end
+it but the end of the session: an error while handling an input is itself a
+fault. A lost keyfob stops only a running step: in idle or paused there is
+nothing to stop, and a keyfob plugged in late starts the session at once.
+
 The rules live beside this module, pure: the machine's table (stages), which
 researcher command applies where (researcher), one guess's arithmetic (trial)
 and the records (records); the Game speaks, moves and waits.
@@ -21,7 +31,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Callable, Coroutine
+import shutil
+from collections.abc import Callable, Coroutine, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar, cast
 
@@ -64,10 +75,11 @@ from kasparctl.game.researcher import (
     gesture_name,
     gesture_needs,
 )
-from kasparctl.game.session import Session
+from kasparctl.game.session import EventLog, Session, StorageFailed, record_to_plain
 from kasparctl.game.speech import Speech, VoiceFailed
 from kasparctl.game.stages import (
     ENDS,
+    FAULTABLE,
     PAUSABLE,
     STATES,
     STEPS,
@@ -83,6 +95,15 @@ log = structlog.get_logger(__name__)
 
 # How long a cancelled step may take to end before it is cancelled again.
 STEP_CANCEL_GRACE_S = 1.0
+# Records that could not be written (the disk full) are kept to write once it takes
+# them again, up to this many; beyond, they are in the journal only.
+UNWRITTEN_LIMIT = 200
+# The stages each kind of fault stops (into the fault stage); in the others it is
+# recorded and said, and the stage stays. A lost keyfob stops a running step only.
+STOPPED_BY = {
+    kind: ("idle", *FAULTABLE, "paused") if kind is not FaultSource.KEYFOB else FAULTABLE
+    for kind in FaultSource
+}
 
 RecordT = TypeVar("RecordT", bound=Record)
 OpenedSession = tuple[Session, SessionPlan, GameState]
@@ -98,11 +119,13 @@ class StepEnded:
 
 @dataclass(frozen=True, slots=True)
 class HardwareFault:
-    """A part failed: the game stops (the fault stage) and Kaspar says so."""
+    """A part failed (or a bug showed): the game stops (the fault stage) and Kaspar says so."""
 
     kind: FaultSource
     detail: str
     joint: str | None = None
+    # What was raised, when it was (a storage fault's StorageFailed names the file).
+    error: Exception | None = None
 
 
 # What the run loop takes, one at a time.
@@ -149,13 +172,36 @@ class Game:
         picker: PhrasePicker,
         open_session: Callable[[], OpenedSession],
         resumed: OpenedSession | None = None,
+        *,
+        event_log: EventLog | None = None,
+        startup_faults: Sequence[HardwareFault] = (),
+        known_problems: Mapping[FaultSource, str] | None = None,
     ) -> None:
-        """A game that opens its session with `open_session` at the start, or resumes `resumed`."""
+        """A game that opens its session with `open_session` at the start, or resumes `resumed`.
+
+        While no session is open its records go to `event_log` (with none, they are
+        only logged). `startup_faults` happened before the game (a servo that did not
+        start, sessions that could not be read): the game begins by stopping for them.
+        `known_problems` are those an earlier game saw that are not over (the keyfob
+        still away, the voice or the disk failing): shown from the start. The keyfob
+        itself reports KeyfobLost when it is not there at its start; an earlier game
+        may have taken that report, hence these.
+        """
         self.config = config
         self.settings = config.game
         self.hw = hardware
         self.picker = picker
-        self.speech = Speech(picker, hardware.voice, self._record)
+        self.speech = Speech(picker, hardware.voice, self._record, self._voice_health)
+        self.event_log = event_log
+        self._startup_faults = tuple(startup_faults)
+        # What is not working now, by part: shown by the daemon, cleared as each comes back.
+        self.problems: dict[FaultSource, str] = dict(known_problems or {})
+        self.speech.failing = self.problems.get(FaultSource.VOICE)
+        # The kinds of fault Kaspar has said since the game last stopped for one.
+        self._said_in_fault: set[FaultSource] = set()
+        self._unwritten: list[tuple[Session | EventLog, Record, float]] = []
+        self._storage_fault_queued = False
+        self._storage_failed_in_event_log = False
         self._open_session = open_session
         self.session: Session | None = None
         self.plan: SessionPlan | None = None
@@ -209,34 +255,92 @@ class Game:
         """Play until the session is finished or stopped; returns the final stage."""
         readers = [asyncio.create_task(self._read_keyfob(), name="keyfob reader")]
         # The HAL latches faults and takes the safe action itself; the game only has
-        # to stop the step and say so, once per fault, including any latched already.
+        # to stop the step and say so, once per fault, including any latched already
+        # (those stop the game before it begins: it never shows idle with them).
         self.hw.servos.on_fault(self._fault_latched)
         for fault in self.hw.servos.faults:
-            self._fault_latched(fault)
+            if fault not in self._seen_faults:
+                self._seen_faults.add(fault)
+                self._startup_faults += (_servo_fault(fault),)
         self.hw.keyfob.set_needs(gesture_needs(self.commands))
         try:
-            if self.resumed:
-                session = self._require_session()
-                bind_context(session=session.id)
-                trials = self._require_state().trials
-                self._record(
-                    SessionRecord(event=SessionEvent.RESUMED, step=self.stage, trials=trials)
-                )
-                self._emit(GameEvent.RESUMED, step=self.stage)
-                await self.speech.announce("session.resumed")
-                if self.stage != "paused":
-                    await self._entered()
-            elif self.stage == "idle":
-                await self._entered()
+            try:
+                await self._begin()
+            except Exception as error:
+                await self._survive(error, "starting the game")
             while self.stage not in ENDS:
-                await self._handle(await self._inputs.get())
+                event = await self._inputs.get()
+                try:
+                    await self._handle(event)
+                except Exception as error:
+                    await self._survive(error, _describe(event))
+            # No more keyfob events taken (they stay queued in the keyfob for the next
+            # game); those already taken are still handled.
+            await _cancelled(readers)
+            await self._after_the_end()
+            await self.speech.finish()  # what Kaspar says of the end is heard to its end
         finally:
             await self._cancel_step()
+            await self.speech.close()
             self.hw.servos.off_fault(self._fault_latched)
-            for task in readers:
-                task.cancel()
-            await asyncio.gather(*readers, return_exceptions=True)
+            await _cancelled(readers)
         return self.stage
+
+    def flush_unwritten(self) -> int:
+        """Write the records the disk refused, in order, as far as it takes them now.
+
+        Returns how many are still unwritten (each is in the journal whole); for the
+        daemon to try once more as the game ends, before its session is closed.
+        """
+        try:
+            self._write_unwritten()
+        except StorageFailed as error:
+            log.error(
+                "records not written; the journal holds them",
+                count=len(self._unwritten),
+                error=str(error),
+            )
+        return len(self._unwritten)
+
+    async def _begin(self) -> None:
+        if self.resumed:
+            session = self._require_session()
+            bind_context(session=session.id)
+            trials = self._require_state().trials
+            self._record(SessionRecord(event=SessionEvent.RESUMED, step=self.stage, trials=trials))
+            self._emit(GameEvent.RESUMED, step=self.stage)
+            await self.speech.announce("session.resumed")
+        # What went wrong before the game began stops it before a step starts.
+        for fault in self._startup_faults:
+            await self._on_fault(fault)
+        if self.stage not in ("paused", "fault"):
+            await self._entered()
+
+    async def _after_the_end(self) -> None:
+        """What came while the session ended (a fault as Kaspar said goodbye) is still handled."""
+        while not self._inputs.empty():
+            event = self._inputs.get_nowait()
+            if isinstance(event, StepEnded):
+                continue
+            try:
+                await self._handle(event)
+            except Exception as error:
+                await self._survive(error, _describe(event))
+
+    async def _survive(self, error: Exception, doing: str) -> None:
+        """An error escaped while `doing` something: a fault like any other, never the end."""
+        if isinstance(error, StorageFailed):
+            fault = HardwareFault(FaultSource.STORAGE, str(error), error=error)
+        else:
+            log.error("software error", doing=doing, exc_info=error)
+            fault = HardwareFault(
+                FaultSource.SOFTWARE, f"{type(error).__name__}: {error} (while {doing})"
+            )
+        try:
+            await self._on_fault(fault)
+        except Exception as again:
+            # Even saying so failed: the loop still goes on to the next input.
+            log.critical("the fault could not be handled", fault=fault.detail, exc_info=again)
 
     async def _handle(self, event: GameInput) -> None:
         if isinstance(event, Gesture):
@@ -246,12 +350,20 @@ class Game:
         elif isinstance(event, HardwareFault):
             await self._on_fault(event)
         elif isinstance(event, KeyfobLost):
-            self._record(HalRecord(event=HalEvent.KEYFOB_LOST, reason=event.reason))
-            await self._on_fault(HardwareFault(FaultSource.KEYFOB, event.reason))
+            await self._on_keyfob_lost(event)
         elif isinstance(event, KeyfobBack):
             self._record(HalRecord(event=HalEvent.KEYFOB_BACK, device=event.device))
+            self._set_problem(FaultSource.KEYFOB, None)
             self._emit(GameEvent.KEYFOB_BACK)
-            await self.speech.announce("fault.keyfob_back")
+            self.speech.announce_soon("fault.keyfob_back")
+
+    async def _on_keyfob_lost(self, event: KeyfobLost) -> None:
+        self._record(HalRecord(event=HalEvent.KEYFOB_LOST, reason=event.reason))
+        if FaultSource.KEYFOB in self.problems and self.stage not in FAULTABLE:
+            # Known already (not there at the start, and the reader says so too).
+            self._set_problem(FaultSource.KEYFOB, event.reason)
+            return
+        await self._on_fault(HardwareFault(FaultSource.KEYFOB, event.reason))
 
     async def _read_keyfob(self) -> None:
         while True:
@@ -260,8 +372,7 @@ class Game:
     def _fault_latched(self, fault: Fault) -> None:
         if fault not in self._seen_faults:
             self._seen_faults.add(fault)
-            detail = f"{fault.kind.value}: {fault.detail}"
-            self._inputs.put_nowait(HardwareFault(FaultSource.SERVO, detail, fault.joint))
+            self._inputs.put_nowait(_servo_fault(fault))
 
     # -- gestures ---------------------------------------------------------------
 
@@ -300,20 +411,36 @@ class Game:
             await self.speech.announce("fault.problem")
             return
         applied = msgspec.structs.replace(given, applied=True, confirm=key)
-        if command is Command.PAUSE and state is not None:
-            self._change(applied)  # sets session_state.paused
-        elif self.session is not None:
-            self._record(applied)
+        opens_session = key is Confirmation.START and self.session is None
+        try:
+            if command is Command.PAUSE and state is not None:
+                self._change(applied)  # sets session_state.paused
+            elif key is Confirmation.STOP:
+                self._record(applied)  # a stop never waits for the disk: safety first
+            elif not opens_session:
+                self._write(applied)  # record first: a command not on disk is not applied
+        except StorageFailed as error:
+            if stage == "fault":
+                self._emit(GameEvent.RESUME_REFUSED)
+            await self._on_fault(HardwareFault(FaultSource.STORAGE, str(error), error=error))
+            return
+        if stage == "fault" and key is Confirmation.RESUME:
+            self._set_problem(FaultSource.SOFTWARE, None)  # the researcher carries on
         # Kaspar confirms before what the command starts, and after what it stops.
         if key in SPOKEN_FIRST:
             await self.speech.announce(f"confirm.{key}")
-        opens_session = self.session is None
         await self._fire(key)
         if opens_session:
-            self._record(applied)  # "start" opens the session: its command is its first record
+            self._write(applied)  # "start" opens the session: its command is its first record
         if key is Confirmation.STOP:
-            # To rest at once, saying goodbye on the way: safety does not wait for words.
-            await asyncio.gather(self.speech.announce(f"confirm.{key}"), self._rest_safely())
+            # To rest at once, saying goodbye on the way: safety does not wait for words,
+            # and a line that fails does not keep Kaspar from resting.
+            outcomes = await asyncio.gather(
+                self.speech.announce(f"confirm.{key}"), self._rest_safely(), return_exceptions=True
+            )
+            for outcome in outcomes:
+                if isinstance(outcome, BaseException):
+                    raise outcome
         elif key not in SPOKEN_FIRST:
             await self.speech.announce(f"confirm.{key}")
 
@@ -354,29 +481,49 @@ class Game:
                 )
             )
             return False
+        self._set_problem(FaultSource.SERVO, None)
         return True
 
     async def _start_session(self) -> None:
-        self.session, self.plan, self.session_state = self._open_session()
-        bind_context(session=self.session.id)
-        self._record(SessionRecord(event=SessionEvent.START, plan=self.session.plan))
-        self._emit(GameEvent.SESSION, session=self.session.id)
+        session, plan, state = self._open_session()
+        try:
+            session.record(SessionRecord(event=SessionEvent.START, plan=session.plan), self._now())
+        except StorageFailed:
+            # A session without its start record is no session: gone, and the next
+            # long green opens a new one once the disk takes records again.
+            session.close()
+            shutil.rmtree(session.directory, ignore_errors=True)
+            raise
+        self.session, self.plan, self.session_state = session, plan, state
+        bind_context(session=session.id)
+        self._set_problem(FaultSource.STORAGE, None)
+        self._emit(GameEvent.SESSION, session=session.id)
 
     # -- entering and leaving states -------------------------------------------
 
     async def _entered(self) -> None:
         stage = self.stage
+        if stage != "fault":
+            self._said_in_fault = set()  # what was said about the last stop is no news now
         bind_context(step=stage)
         self._emit(GameEvent.STATE, state=stage)
         state = self.session_state
-        if state is not None and stage in (*STEPS, *ENDS) and state.step != stage:
-            self._change(StepRecord(to=stage))
+        if stage in ENDS:
+            # The session ends whatever the disk says: a stop must never wait for it.
+            try:
+                if state is not None and state.step != stage:
+                    self._change(StepRecord(to=stage))
+                if self.session is not None and state is not None:
+                    self.session.save_state(state, finished=True)
+            except StorageFailed as error:
+                self._storage_failed(error)
+            return
+        if state is not None and stage in STEPS and state.step != stage:
+            self._change(StepRecord(to=stage))  # a step not on disk is not entered
         if stage in STEPS:
             self._start_step(stage)
         elif stage == "idle":
             self._emit(GameEvent.WAITING_FOR_RESEARCHER, step="idle")
-        elif stage in ENDS and self.session is not None and state is not None:
-            self.session.save_state(state, finished=True)
 
     async def _leaving(self) -> None:
         await self._cancel_step()
@@ -420,35 +567,75 @@ class Game:
     async def _on_step_ended(self, event: StepEnded) -> None:
         if event.step != self.stage:
             return
-        if event.error is None:
+        error = event.error
+        if error is None:
             await self.advance()
-        elif isinstance(event.error, VoiceFailed):
-            await self._on_fault(HardwareFault(FaultSource.VOICE, str(event.error)))
-        elif isinstance(event.error, HalError):
-            await self._on_fault(HardwareFault(FaultSource.SERVO, str(event.error)))
+        elif isinstance(error, VoiceFailed):
+            await self._on_fault(HardwareFault(FaultSource.VOICE, str(error)))
+        elif isinstance(error, StorageFailed):
+            await self._on_fault(HardwareFault(FaultSource.STORAGE, str(error), error=error))
+        elif isinstance(error, HalError):
+            await self._on_fault(HardwareFault(FaultSource.SERVO, str(error)))
         else:
-            log.error("step failed", step=event.step, error=repr(event.error))
-            detail = f"{event.step}: {event.error!r}"
+            log.error("step failed", step=event.step, exc_info=error)
+            detail = f"{event.step}: {error!r}"
             await self._on_fault(HardwareFault(FaultSource.SOFTWARE, detail))
 
     async def _on_fault(self, fault: HardwareFault) -> None:
+        """Record, log, show and say a fault; stop the running step where the kind stops it."""
+        stage = self.stage
+        if fault.kind is FaultSource.STORAGE:
+            self._storage_fault_queued = False
+            if isinstance(fault.error, StorageFailed):
+                self._storage_failed_in_event_log = fault.error.in_event_log
+        # Known before it is recorded: a record that fails for the same disk is not a new fault.
+        self._set_problem(fault.kind, _problem(fault), logged=True)
         self._record(
-            FaultRecord(fault=fault.kind, detail=fault.detail, joint=fault.joint, state=self.stage)
+            FaultRecord(fault=fault.kind, detail=fault.detail, joint=fault.joint, state=stage)
         )
-        log.warning("fault", fault=fault.kind.value, detail=fault.detail, joint=fault.joint)
-        if self.stage == "fault":
-            # Said once per stop: an unplugged bus latches every joint on it, and six
-            # announcements would keep the researcher's resume waiting for half a minute.
-            return
-        await self.fail()  # from any stage but the ends (the table's "fail" sources)
-        self._emit(GameEvent.FAULT, kind=fault.kind)
+        say = log.warning if fault.kind is FaultSource.KEYFOB else log.error
+        say("fault", fault=fault.kind.value, detail=fault.detail, joint=fault.joint, state=stage)
+        if stage == "fault":
+            # Said once per stop and kind: an unplugged bus latches every joint on it, and
+            # six announcements would keep the researcher's resume waiting for half a minute.
+            if fault.kind in self._said_in_fault:
+                return
+        elif stage in STOPPED_BY[fault.kind]:
+            await self.fail()
+            self._said_in_fault = set()
+            self._emit(GameEvent.FAULT, kind=fault.kind, detail=fault.detail)
+        self._said_in_fault.add(fault.kind)
+        # Said while the game goes on listening: the keyfob coming back, the researcher's
+        # resume or stop are heard before the line ends.
         if fault.kind is FaultSource.SERVO:
             joint = (fault.joint or "a joint").replace("_", " ")
-            await self.speech.announce("fault.servo", joint=joint)
+            self.speech.announce_soon("fault.servo", joint=joint)
         elif fault.kind is FaultSource.KEYFOB:
-            await self.speech.announce("fault.keyfob_lost")
+            self.speech.announce_soon("fault.keyfob_lost")
         else:
-            await self.speech.announce("fault.problem")
+            self.speech.announce_soon("fault.problem")
+
+    def _set_problem(self, kind: FaultSource, detail: str | None, logged: bool = False) -> None:
+        """`kind` is not working (`detail` says why), or works again (None); listeners are told.
+
+        A new problem is logged (at warning for the keyfob, error for the rest) unless
+        the caller logs it (`logged`); one that clears is logged at info.
+        """
+        before = self.problems.get(kind)
+        if detail == before:
+            return
+        if detail is None:
+            del self.problems[kind]
+            log.info("working again", part=kind.value)
+        else:
+            self.problems[kind] = detail
+            if before is None and not logged:
+                say = log.warning if kind is FaultSource.KEYFOB else log.error
+                say("not working", part=kind.value, detail=detail)
+        self._emit(GameEvent.PROBLEMS, problems=dict(self.problems))
+
+    def _voice_health(self, failing: str | None) -> None:
+        self._set_problem(FaultSource.VOICE, failing)
 
     def note_shutdown(self, reason: str) -> None:
         """The daemon is stopping: the session stays unfinished, to be resumed at the next start."""
@@ -626,23 +813,74 @@ class Game:
 
     # -- speaking, recording ----------------------------------------------------
 
-    def _record(self, record: RecordT) -> RecordT | None:
-        if self.session is None:
+    def _write(self, record: RecordT) -> RecordT | None:
+        """Record first, or not at all: to the session, or the event log when none is open.
+
+        StorageFailed when it cannot be written (records kept from an earlier failure
+        are written first, in order). None only when there is nowhere to write.
+        """
+        target: Session | EventLog | None = self.session or self.event_log
+        if target is None:
             log.info("not recorded: no session is open", record=repr(record))
             return None
-        return self.session.record(record, self._now())
+        self._write_unwritten()
+        written = target.record(record, self._now())
+        # Writing works again, where it failed: a session's files show it for both, the
+        # event log only for itself (sessions/ can be broken while the log is not).
+        if isinstance(target, Session) or self._storage_failed_in_event_log:
+            self._set_problem(FaultSource.STORAGE, None)
+        return written
+
+    def _write_unwritten(self) -> None:
+        while self._unwritten:
+            kept_target, kept, at = self._unwritten[0]
+            kept_target.record(kept, at)
+            self._unwritten.pop(0)
+
+    def _record(self, record: RecordT) -> RecordT | None:
+        """Record history (a fault, an ignored press): never raises. One the disk refuses is
+        kept to write later, logged whole, and stops the game (a storage fault)."""
+        target: Session | EventLog | None = self.session or self.event_log
+        try:
+            return self._write(record)
+        except StorageFailed as error:
+            if target is not None and len(self._unwritten) < UNWRITTEN_LIMIT:
+                self._unwritten.append((target, record, self._now()))
+            # The journal keeps what the disk could not, whole.
+            log.error("record not written", error=str(error), record=_plain(record))
+            self._storage_failed(error)
+            return None
+
+    def _storage_failed(self, error: StorageFailed) -> None:
+        """A write failed where nothing else stops for it: a storage fault, once per stop."""
+        self._storage_failed_in_event_log = error.in_event_log
+        self._set_problem(FaultSource.STORAGE, str(error), logged=True)
+        # Once per stop: in the fault stage, or once the session is over, it is said once.
+        said = FaultSource.STORAGE in self._said_in_fault and self.stage in ("fault", *ENDS)
+        if not (said or self._storage_fault_queued):
+            self._storage_fault_queued = True
+            self._inputs.put_nowait(HardwareFault(FaultSource.STORAGE, str(error), error=error))
 
     def _change(self, record: RecordT) -> RecordT:
-        """Record, apply, snapshot: the order that makes a crash lose nothing."""
+        """Record, apply, snapshot: the order that makes a crash lose nothing.
+
+        StorageFailed when the record cannot be written (nothing is applied) or the
+        snapshot cannot (the record is on disk and applied: a resume replays it).
+        """
         session, state = self._require_session(), self._require_state()
-        written = session.record(record, self._now())
+        written = self._write(record)
+        assert written is not None  # a session is open
         state.apply(written, self.settings)
         session.save_state(state)
         return written
 
     def _emit(self, event: GameEvent, **info: Any) -> None:
         for listener in self.listeners:
-            listener(event, info)
+            try:
+                listener(event, info)
+            except Exception as error:
+                # A listener (the daemon's status, a narrator) must never stop the game.
+                log.error("a game listener failed", game_event=event.value, exc_info=error)
 
     def _now(self) -> float:
         return asyncio.get_running_loop().time()
@@ -664,3 +902,36 @@ class Game:
         if self.plan is None:
             raise RuntimeError("no session is open")
         return self.plan
+
+
+async def _cancelled(tasks: list[asyncio.Task[None]]) -> None:
+    for task in tasks:
+        task.cancel()
+    await asyncio.gather(*tasks, return_exceptions=True)
+
+
+def _describe(event: GameInput) -> str:
+    """What the run loop was handling, in words, for a fault's detail."""
+    if isinstance(event, Gesture):
+        return f"handling {gesture_name(event)}"
+    if isinstance(event, StepEnded):
+        return f"ending the step {event.step}"
+    if isinstance(event, HardwareFault):
+        return f"handling a {event.kind.value} fault"
+    return f"handling the keyfob {'lost' if isinstance(event, KeyfobLost) else 'back'}"
+
+
+def _servo_fault(fault: Fault) -> HardwareFault:
+    return HardwareFault(FaultSource.SERVO, f"{fault.kind.value}: {fault.detail}", fault.joint)
+
+
+def _problem(fault: HardwareFault) -> str:
+    """A fault as the problem it leaves: the joint first, where there is one."""
+    return f"{fault.joint}: {fault.detail}" if fault.joint else fault.detail
+
+
+def _plain(record: Record) -> dict[str, Any] | str:
+    try:
+        return record_to_plain(cast(Any, record))
+    except (TypeError, ValueError):
+        return repr(record)

@@ -50,6 +50,9 @@ class FaultSource(enum.StrEnum):
     VOICE = "voice"
     # A step that raised an error no hardware explains: a bug, recorded and stopped like a fault.
     SOFTWARE = "software"
+    # A record or snapshot that could not be written (the disk full, the state directory
+    # unwritable): the game stops rather than play on unsaved.
+    STORAGE = "storage"
 
 
 class Confirmation(enum.StrEnum):

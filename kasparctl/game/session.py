@@ -1,6 +1,8 @@
 """Crash-safe sessions: a plan, a state snapshot, and append-only records.
 
-One directory per session under <state_dir>/sessions/<id>/:
+One directory per session under <state_dir>/sessions/<id>/ (and, for what happens
+while no session is open, the daemon's event log <state_dir>/events.jsonl: the
+same typed records, written the same way; see EventLog):
 
 - plan.json      the session's plan entry and condition, written once;
 - records.jsonl  every trial, researcher command, fault and HAL event, one
@@ -23,9 +25,11 @@ left out; it never stops a reader.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import os
 import re
+import shutil
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,6 +47,7 @@ log = structlog.get_logger(__name__)
 PLAN_FILE = "plan.json"
 STATE_FILE = "state.json"
 RECORDS_FILE = "records.jsonl"
+EVENTS_FILE = "events.jsonl"
 TORN_SUFFIX = ".torn"
 PRIVATE_FILE = 0o600
 PRIVATE_DIR = 0o700
@@ -53,6 +58,26 @@ RecordT = TypeVar("RecordT", bound=Record)
 
 class SessionError(Exception):
     """A session directory that cannot be written or read back, with the path."""
+
+
+class StorageFailed(SessionError):
+    """A record, snapshot or session directory could not be written (the disk full, the
+    state directory unwritable); the message names the file and the system's reason."""
+
+    def __init__(self, message: str, path: Path) -> None:
+        """`message` says what failed and why; `path` is what could not be written."""
+        super().__init__(message)
+        self.path = path
+
+    @property
+    def in_event_log(self) -> bool:
+        """Whether the daemon's event log failed (not a session's files)."""
+        return self.path.name == EVENTS_FILE
+
+
+def _storage_failed(path: Path, failed: str, error: OSError) -> StorageFailed:
+    reason = error.strerror or str(error)
+    return StorageFailed(f"{path}: {failed}: {reason}", path)
 
 
 def write_atomic(path: Path, data: bytes) -> None:
@@ -259,9 +284,19 @@ class RecordLog:
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, PRIVATE_FILE)
 
     def append(self, line: bytes) -> None:
-        """Write one encoded record and its newline, and fsync."""
-        _write_all(self._fd, line + b"\n")
-        os.fsync(self._fd)
+        """Write one encoded record and its newline, and fsync.
+
+        An OSError (the disk full) is raised after cutting the file back to where
+        it was: a record half written is never left in the log for the next to follow.
+        """
+        size = os.fstat(self._fd).st_size
+        try:
+            _write_all(self._fd, line + b"\n")
+            os.fsync(self._fd)
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._fd, size)
+            raise
 
     def close(self) -> None:
         """Close the file; appending after this fails."""
@@ -302,10 +337,15 @@ class Session:
         directory = sessions / session_id
         try:
             directory.mkdir(mode=PRIVATE_DIR)
+        except OSError as error:
+            raise _storage_failed(directory, "cannot create the session", error) from error
+        try:
             full_plan = {"session": session_id, "created": _utc_now(), **plan}
             write_atomic(directory / PLAN_FILE, _encoder.encode(full_plan))
         except OSError as error:
-            raise SessionError(f"{directory}: cannot create the session: {error}") from error
+            # No half-made session left behind: a directory without its plan is no session.
+            shutil.rmtree(directory, ignore_errors=True)
+            raise _storage_failed(directory, "cannot create the session", error) from error
         return cls(directory, full_plan, last_seq=0)
 
     @classmethod
@@ -361,7 +401,11 @@ class Session:
     def save_state(self, state: GameState, finished: bool = False) -> None:
         """Replace the snapshot with `state`, as of the last record written."""
         snapshot = _SnapshotOut(self.last_seq, finished, _utc_now(), state_to_plain(state))
-        write_atomic(self.directory / STATE_FILE, _encoder.encode(snapshot))
+        path = self.directory / STATE_FILE
+        try:
+            write_atomic(path, _encoder.encode(snapshot))
+        except OSError as error:
+            raise _storage_failed(path, "cannot write the state snapshot", error) from error
 
     @property
     def finished(self) -> bool:
@@ -371,11 +415,16 @@ class Session:
     # -- records --------------------------------------------------------------
 
     def record(self, record: RecordT, clock: float) -> RecordT:
-        """Append `record`, stamped with its seq, the time and `clock`; return it once on disk."""
-        stamped = msgspec.structs.replace(
-            record, seq=self.last_seq + 1, time=_utc_now(), clock=clock
-        )
-        self._log.append(_encoder.encode(stamped))
+        """Append `record`, stamped with its seq, the time and `clock`; return it once on disk.
+
+        StorageFailed when it cannot be written; its seq is then not used.
+        """
+        stamped = _stamped(record, self.last_seq + 1, clock)
+        try:
+            self._log.append(_encoder.encode(stamped))
+        except OSError as error:
+            failed = f"cannot write record {stamped.seq}"
+            raise _storage_failed(self._log.path, failed, error) from error
         self.last_seq += 1
         return stamped
 
@@ -386,6 +435,55 @@ class Session:
     def close(self) -> None:
         """Close the record log."""
         self._log.close()
+
+
+def _stamped(record: RecordT, seq: int, clock: float) -> RecordT:
+    return msgspec.structs.replace(record, seq=seq, time=_utc_now(), clock=clock)
+
+
+class EventLog:
+    """What happens while no session is open: <state_dir>/events.jsonl, the daemon's record.
+
+    A fault before any session (the keyfob not there at boot, a servo that will not
+    start, the disk full), a command that did not apply in idle, a line Kaspar could
+    not say: the same typed records a session writes, stamped and fsynced the same
+    way (each on disk before the robot reacts), numbered on from the last one in the
+    file. The file is made at the first record, private like a session's files. It
+    is no session: the readers of sessions/ never see it; read_records reads it.
+    """
+
+    def __init__(self, state_dir: Path) -> None:
+        """The event log of `state_dir`; nothing is opened until the first record."""
+        self.path = state_dir / EVENTS_FILE
+        self._log: RecordLog | None = None
+        self.last_seq = 0
+
+    def record(self, record: RecordT, clock: float) -> RecordT:
+        """Append `record` as Session.record does; StorageFailed when it cannot be written."""
+        try:
+            if self._log is None:
+                self.path.parent.mkdir(mode=PRIVATE_DIR, parents=True, exist_ok=True)
+                read = read_json_lines(self.path, repair=True)
+                for warning in read.warnings:
+                    log.warning("event log repaired", detail=warning)
+                self.last_seq = max((_seq(plain) for plain in read.records), default=0)
+                self._log = RecordLog(self.path)
+            stamped = _stamped(record, self.last_seq + 1, clock)
+            self._log.append(_encoder.encode(stamped))
+        except OSError as error:
+            raise _storage_failed(self.path, "cannot write the event log", error) from error
+        self.last_seq += 1
+        return stamped
+
+    def records(self) -> RecordsRead:
+        """Every record of the log, typed, with a warning for each line left out."""
+        return read_records(self.path)
+
+    def close(self) -> None:
+        """Close the file; the next record opens it again."""
+        if self._log is not None:
+            self._log.close()
+            self._log = None
 
 
 def _seq(plain: dict[str, Any]) -> int:
@@ -399,7 +497,7 @@ def _sessions_dir(state_dir: Path) -> Path:
         state_dir.mkdir(mode=PRIVATE_DIR, parents=True, exist_ok=True)
         sessions.mkdir(mode=PRIVATE_DIR, exist_ok=True)
     except OSError as error:
-        raise SessionError(f"{sessions}: cannot create the state directory: {error}") from error
+        raise _storage_failed(sessions, "cannot create the state directory", error) from error
     return sessions
 
 

@@ -10,7 +10,16 @@ SIGTERM/SIGINT: STOPPING=1, Kaspar stops mid-word, the session is left
 unfinished on disk (it resumes at the next start), Kaspar goes to rest within
 every joint's speed limit, then holds or goes limp as configured; exit 0.
 SIGHUP between sessions reloads the configuration (phrases, plan); during a
-session it is refused and logged.
+session it is refused and logged, and `kasparctl reload` (systemd's
+ExecReload=) is told so and fails (kasparctl.service.reload).
+
+One writer per state directory: the daemon holds its StateDirLock for its
+whole life, and a second writer is refused at once. While no session is open,
+what happens is recorded in the event log (<state_dir>/events.jsonl). Nothing
+that goes wrong stops the daemon or leaves it idle, deaf and silent: a part
+that did not start, sessions that cannot be read, a game that ended by an
+error all begin the next game in its fault stage, shown in STATUS= and said,
+for the researcher to resume once it is fixed.
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ import secrets
 import signal
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,28 +46,30 @@ from hal.build import build
 from hal.clock import LoopClock
 from hal.errors import HalError
 from kasparctl.config import Config, SessionPlan, load_config
-from kasparctl.game.events import GameEvent
-from kasparctl.game.machine import Game
-from kasparctl.game.phrases import PhrasePicker, load_phrasebook
-from kasparctl.game.session import PLAN_FILE, Session, find_unfinished, is_finished, session_dirs
-from kasparctl.game.state import GameState, restore
+from kasparctl.game.events import GameEvent, Listener
+from kasparctl.game.lock import StateDirBusy, StateDirLock
+from kasparctl.game.machine import Game, HardwareFault
+from kasparctl.game.phrases import PhraseBook, PhrasePicker, load_phrasebook
+from kasparctl.game.records import FaultSource
+from kasparctl.game.session import (
+    PLAN_FILE,
+    EventLog,
+    Session,
+    SessionError,
+    find_unfinished,
+    is_finished,
+    session_dirs,
+)
+from kasparctl.game.state import GameState, StateError, restore
 from kasparctl.log import configure_logging
+from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
 from kasparctl.service.sdnotify import Notifier, watchdog_interval
+from kasparctl.service.status import STATUS_WORDS, status_line
 
 log = structlog.get_logger("kasparctl.service.daemon")
 
-STATUS_WORDS = {
-    "idle": "waiting: long green starts the session",
-    "placing": "step 1: placing the bags",
-    "teaching": "step 2: teaching Kaspar to point",
-    "revealing": "step 3: revealing the toys",
-    "guessing": "step 4: Kaspar guesses the names",
-    "farewell": "step 5: farewell",
-    "finished": "session finished",
-    "paused": "paused: long red resumes",
-    "fault": "fault: see the journal; long red resumes once cleared",
-    "stopped": "session stopped",
-}
+# What makes a state directory's sessions unreadable: a file, its JSON, its records.
+UNREADABLE = (SessionError, StateError, OSError, msgspec.MsgspecError, KeyError, TypeError)
 # The loop may blindly trust this much lateness of its own timer before it
 # counts as unresponsive (a busy but healthy loop on a small board).
 LOOP_LAG_LIMIT_S = 1.0
@@ -72,21 +84,48 @@ class DaemonOptions:
     config_path: str
     sim: bool = False
     state_dir: str | None = None
+    # With sim: the keyfob's keys from this fifo, which may appear later (FifoKeyfob).
+    keys: str | None = None
 
 
 class Daemon:
     """The service: the hardware, one session after another, systemd's notifications, stopping."""
 
-    def __init__(self, options: DaemonOptions, notifier: Notifier | None = None) -> None:
-        """Load the configuration; nothing is opened until run()."""
+    def __init__(
+        self,
+        options: DaemonOptions,
+        notifier: Notifier | None = None,
+        *,
+        hardware: Hardware | None = None,
+        listeners: Sequence[Listener] = (),
+    ) -> None:
+        """Load the configuration; nothing is opened until run().
+
+        `hardware` replaces what the configuration builds (a test's rig); `listeners`
+        follow every game the daemon plays, as the daemon's own status does.
+        """
         self.options = options
         self.config = self._load()
+        # Fixed for the daemon's life: its lock is on this directory.
+        self._state_dir = Path(self.config.state_dir)
         self.notifier = notifier or Notifier()
-        self.hw: Hardware | None = None
+        self.hw: Hardware | None = hardware
         self.game: Game | None = None
+        self.listeners = list(listeners)
+        self.events = EventLog(self._state_dir)
+        self.lock = StateDirLock(self._state_dir)
         self._stopping = asyncio.Event()
         self._stop_reason = ""
         self._reload = False
+        self._reload_tokens: list[str | None] = []
+        self._reload_desk = ReloadDesk(runtime_directory())
+        # Faults for the next game to begin with (servos that did not start, a game
+        # that ended by an error), and whether it must read the sessions again.
+        self._pending_faults: list[HardwareFault] = []
+        self._read_again = False
+        self._playing: asyncio.Task[str] | None = None
+        self._carried_problems: dict[FaultSource, str] = {}
+        self._book: PhraseBook | None = None
 
     def _load(self) -> Config:
         config = load_config(self.options.config_path)
@@ -97,12 +136,47 @@ class Daemon:
     @property
     def state_dir(self) -> Path:
         """Where sessions are kept (the configuration's, or the one given at the start)."""
-        return Path(self.config.state_dir)
+        return self._state_dir
 
     # -- the service ---------------------------------------------------------------
 
     async def run(self) -> int:
-        """Run until SIGTERM or SIGINT; returns the exit status (0)."""
+        """Run until SIGTERM or SIGINT; returns the exit status (0).
+
+        StateDirBusy at once, before anything is opened, when another process writes
+        to the state directory.
+        """
+        self._take_lock(at_start=True)
+        try:
+            return await self._run()
+        finally:
+            self.events.close()
+            self.lock.release()
+
+    def _take_lock(self, at_start: bool = False) -> bool:
+        """Hold the state directory's lock; False (and a fault for the next game) if it cannot.
+
+        At the start another writer is fatal (StateDirBusy): the service must not run
+        beside a demo on its records. A directory that cannot be made or opened is a
+        storage fault the researcher sees; it is tried again before each game.
+        """
+        if self.lock.held:
+            return True
+        try:
+            self.lock.acquire()
+        except StateDirBusy as busy:
+            if at_start:
+                raise
+            self._pending_faults.append(HardwareFault(FaultSource.STORAGE, str(busy)))
+            return False
+        except OSError as error:
+            detail = f"{self.state_dir}: cannot use the state directory: {error.strerror or error}"
+            log.error("state directory unusable", state_dir=str(self.state_dir), error=detail)
+            self._pending_faults.append(HardwareFault(FaultSource.STORAGE, detail))
+            return False
+        return True
+
+    async def _run(self) -> int:
         faulthandler.enable()  # a watchdog abort leaves every thread's stack in the journal
         loop = asyncio.get_running_loop()
         for signum in (signal.SIGTERM, signal.SIGINT):
@@ -111,14 +185,10 @@ class Daemon:
         if os.environ.get(DEBUG_BLOCK_ENV):
             # For an engineer to prove the watchdog restarts a hung service.
             loop.add_signal_handler(signal.SIGUSR2, self._block_loop)
-        clock = LoopClock()
-        self.hw = build(
-            self.config.servos,
-            self.config.keyfob,
-            self.config.voice,
-            clock,
-            sim=self.options.sim,
-        )
+        # Read once (a broken file stops the start, before READY), and again at a reload.
+        self._book = load_phrasebook(self.config.language, self.config.phrases_dir)
+        if self.hw is None:
+            self.hw = self._build_hardware()
         await self._open_hardware()
         watchdog = asyncio.create_task(self._watchdog(), name="watchdog")
         self.notifier.ready(STATUS_WORDS["idle"])
@@ -141,6 +211,21 @@ class Daemon:
             log.info("stopping", reason=reason)
             self._stopping.set()
 
+    def _build_hardware(self) -> Hardware:
+        clock = LoopClock()
+        hardware = build(
+            self.config.servos,
+            self.config.keyfob,
+            self.config.voice,
+            clock,
+            sim=self.options.sim,
+        )
+        if self.options.keys is not None:
+            from hal.keyfob.sim import FifoKeyfob
+
+            hardware.keyfob = FifoKeyfob(self.options.keys, clock)
+        return hardware
+
     async def _open_hardware(self) -> None:
         assert self.hw is not None
         servos = self.hw.servos
@@ -152,18 +237,45 @@ class Daemon:
         except HalError as error:
             # Recorded and spoken, not fatal: the researcher sees the fault and acts.
             log.error("servos not ready", error=str(error))
+            detail = f"servos not ready: {error}"
+            self._pending_faults.append(HardwareFault(FaultSource.SERVO, detail))
         await self.hw.keyfob.start()
 
     async def _one_session(self) -> None:
         assert self.hw is not None
-        resumed = self._resume()
-        book = load_phrasebook(self.config.language, self.config.phrases_dir)
-        picker = PhrasePicker(book, np.random.default_rng())
-        game = Game(self.config, self.hw, picker, self._open_session, resumed)
+        resumed = None
+        self._read_again = False
+        if self._take_lock():
+            try:
+                resumed = self._resume()
+            except UNREADABLE as error:
+                detail = f"cannot read the sessions in {self.state_dir}: {error}"
+                log.error("sessions unreadable", state_dir=str(self.state_dir), error=str(error))
+                self._pending_faults.append(HardwareFault(FaultSource.STORAGE, detail))
+        # Until the sessions are read (and the directory locked) no session may start:
+        # a resume from the fault ends this game, and the next one reads them again.
+        self._read_again = not self.lock.held or any(
+            fault.kind is FaultSource.STORAGE for fault in self._pending_faults
+        )
+        faults, self._pending_faults = self._pending_faults, []
+        assert self._book is not None  # read in _run
+        picker = PhrasePicker(self._book, np.random.default_rng())
+        game = Game(
+            self.config,
+            self.hw,
+            picker,
+            self._open_session,
+            resumed,
+            event_log=self.events,
+            startup_faults=faults,
+            known_problems=self._carried_problems,
+        )
         game.listeners.append(self._on_game_event)
+        game.listeners.extend(self.listeners)
         self.game = game
-        self.notifier.status(STATUS_WORDS.get(game.stage, game.stage))
+        self.notifier.status(status_line(game.stage, game.problems))
         playing = asyncio.create_task(game.run(), name="game")
+        self._playing = playing
         stopping = asyncio.create_task(self._stopping.wait())
         await asyncio.wait({playing, stopping}, return_when=asyncio.FIRST_COMPLETED)
         stopping.cancel()
@@ -172,16 +284,39 @@ class Daemon:
                 game.note_shutdown(self._stop_reason)
             playing.cancel()
             await asyncio.gather(playing, return_exceptions=True)
-        elif not playing.cancelled() and playing.exception() is not None:
-            log.error("game ended by an error", error=repr(playing.exception()))
+        elif not playing.cancelled() and (failure := playing.exception()) is not None:
+            # The game catches what it can; this is a bug it could not. The next game
+            # begins in its fault stage rather than loop: the researcher decides.
+            log.error("game ended by an error", exc_info=failure)
+            detail = f"the game ended by an error: {failure!r}"
+            self._pending_faults.append(HardwareFault(FaultSource.SOFTWARE, detail))
+        self._playing = None
+        game.flush_unwritten()
+        # Not over with the game: the keyfob still away (its report was this game's),
+        # the voice or the disk until a line is heard or a record written.
+        self._carried_problems = {
+            kind: detail
+            for kind, detail in game.problems.items()
+            if kind in (FaultSource.KEYFOB, FaultSource.VOICE, FaultSource.STORAGE)
+        }
         if game.session is not None:
             game.session.close()
         if self._reload:
             self._apply_reload()
 
     def _on_game_event(self, event: GameEvent, info: dict[str, Any]) -> None:
-        if event is GameEvent.STATE:
-            self.notifier.status(STATUS_WORDS.get(info["state"], info["state"]))
+        game = self.game
+        if game is None or event not in (GameEvent.STATE, GameEvent.PROBLEMS):
+            return
+        self.notifier.status(status_line(game.stage, game.problems))
+        if event is GameEvent.STATE and info["state"] == "idle" and self._read_again:
+            # Resumed from the storage fault: read the sessions again before any starts.
+            self._read_again = False
+            self._end_game()
+
+    def _end_game(self) -> None:
+        if self._playing is not None and not self._playing.done():
+            self._playing.cancel()
 
     # -- sessions --------------------------------------------------------------------
 
@@ -233,28 +368,43 @@ class Daemon:
     # -- signals, reload, watchdog ------------------------------------------------------
 
     def _request_reload(self) -> None:
+        token = self._reload_desk.token()
         game = self.game
         if game is not None and game.session is not None:
             log.warning(
                 "reload refused: a session is running; send SIGHUP again once it has ended",
                 session=game.session.id,
             )
+            self._reload_desk.answer(
+                token, Outcome.REFUSED, f"a session is running ({game.session.id}); reload after it"
+            )
             return
         self._reload = True
+        self._reload_tokens.append(token)
         # Ending the idle game lets the session loop reload before the next one.
-        for task in asyncio.all_tasks():
-            if task.get_name() == "game":
-                task.cancel()
+        self._end_game()
 
     def _apply_reload(self) -> None:
         self._reload = False
+        tokens, self._reload_tokens = self._reload_tokens, []
         try:
-            self.config = self._load()
-            load_phrasebook(self.config.language, self.config.phrases_dir)
+            config = self._load()
+            book = load_phrasebook(config.language, config.phrases_dir)
         except Exception as error:  # a bad file must not stop the robot
             log.error("reload failed; keeping the running configuration", error=str(error))
+            for token in tokens:
+                self._reload_desk.answer(token, Outcome.FAILED, str(error))
             return
+        if Path(config.state_dir) != self.state_dir:
+            log.warning(
+                "state_dir changed: takes effect at the next restart",
+                running=str(self.state_dir),
+                configured=config.state_dir,
+            )
+        self.config, self._book = config, book
         log.info("configuration reloaded", sessions=len(self.config.sessions))
+        for token in tokens:
+            self._reload_desk.answer(token, Outcome.RELOADED)
 
     def _block_loop(self) -> None:
         seconds = float(os.environ.get(DEBUG_BLOCK_ENV, "0") or 0)
@@ -306,7 +456,10 @@ class Daemon:
 
 
 def run_daemon(options: DaemonOptions) -> int:
-    """`kasparctl run`: the service in the foreground, logging as configured."""
+    """`kasparctl run`: the service in the foreground, logging as configured.
+
+    StateDirBusy, before anything is opened, when another process writes there.
+    """
     daemon = Daemon(options)
     configure_logging(daemon.config.logging.level, daemon.config.logging.format)
     return asyncio.run(daemon.run())

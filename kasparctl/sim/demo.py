@@ -30,7 +30,7 @@ from kasparctl.config import Config, SessionPlan, parse_config
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.machine import Game
 from kasparctl.game.phrases import PhrasePicker, load_phrasebook
-from kasparctl.game.session import Session, find_unfinished
+from kasparctl.game.session import EventLog, Session, find_unfinished
 from kasparctl.game.stages import ENDS
 from kasparctl.game.state import GameState, restore
 from kasparctl.sim import simtime
@@ -127,6 +127,8 @@ class DemoRig(Generic[ServosT]):
             await self.keyfob.close()
             await self.voice.close()
             await self.servos.close()
+            if self.game.event_log is not None:
+                self.game.event_log.close()
         state, session = self.game.session_state, self.game.session
         assert state is not None and session is not None
         session.close()
@@ -196,7 +198,10 @@ def assemble(
         state = GameState.new(config.game, config.profile(planned.profile), options.seed)
         return session, planned, state
 
-    game = Game(config, Hardware(servos, keyfob, voice), picker, open_session, resumed)
+    hardware = Hardware(servos, keyfob, voice)
+    # Before the session opens and after it ends, what happens goes where the service puts it.
+    events = EventLog(options.state_dir)
+    game = Game(config, hardware, picker, open_session, resumed, event_log=events)
     children = None
     if not options.interactive:
         # A resumed game gets fresh but reproducible children: seeded by where it resumed.

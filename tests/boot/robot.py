@@ -114,6 +114,31 @@ class Robot:
         except AssertionError as error:
             raise AssertionError(f"{error}; it is {self.show('StatusText')}") from None
 
+    def override(self, name: str, text: str | None) -> None:
+        """Put a drop-in `name` on the unit (None: take it away), then daemon-reload."""
+        path = f"/etc/systemd/system/{UNIT}.d/{name}.conf"
+        if text is None:
+            self.machine.run(["rm", "-f", path])
+        else:
+            self.machine.write(path, text)
+        self.systemctl("daemon-reload")
+
+    def status_text(self) -> str:
+        """The service's STATUS= as systemctl shows it."""
+        return self.show("StatusText")["StatusText"]
+
+    def wait_for_status_where(self, what: str, wanted: Callable[[str], bool]) -> str:
+        """Wait until STATUS= satisfies wanted(text); returns it."""
+
+        def reached() -> str | None:
+            text = self.status_text()
+            return text if wanted(text) else None
+
+        try:
+            return self.wait_for(what, reached)
+        except AssertionError as error:
+            raise AssertionError(f"{error}; it is {self.status_text()!r}") from None
+
     # -- the keyfob --------------------------------------------------------------------
 
     def press(self, keys: str) -> None:

@@ -1,0 +1,52 @@
+"""The service's STATUS= line: where the game is, and every part that is not working.
+
+`systemctl status kasparctl` shows it; it is the first thing a researcher (or
+whoever helps them on the phone) reads. One line, bounded: the stage in words,
+then each problem with its reason, e.g.
+"fault: long red resumes once it is fixed | voice failing: player exited with 1:
+ALSA lib confmisc.c:855:(parse_card) cannot find card '0' | ...".
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from kasparctl.game.records import FaultSource
+
+STATUS_WORDS = {
+    "idle": "waiting: long green starts the session",
+    "placing": "step 1: placing the bags",
+    "teaching": "step 2: teaching Kaspar to point",
+    "revealing": "step 3: revealing the toys",
+    "guessing": "step 4: Kaspar guesses the names",
+    "farewell": "step 5: farewell",
+    "finished": "session finished",
+    "paused": "paused: long red resumes",
+    "fault": "fault: see the journal; long red resumes once cleared",
+    "stopped": "session stopped",
+}
+PROBLEM_WORDS = {
+    FaultSource.SERVO: "servo fault",
+    FaultSource.KEYFOB: "keyfob not connected",
+    FaultSource.VOICE: "voice failing",
+    FaultSource.SOFTWARE: "software error",
+    FaultSource.STORAGE: "records cannot be saved",
+}
+# systemd keeps STATUS= whole, but a line this long is still read at a glance.
+DETAIL_LIMIT = 200
+STATUS_LIMIT = 600
+
+
+def status_line(stage: str, problems: Mapping[FaultSource, str] | None = None) -> str:
+    """The STATUS= text for `stage` with `problems` (part -> why), each reason cut to a limit."""
+    words = STATUS_WORDS.get(stage, stage)
+    parts = [
+        f"{PROBLEM_WORDS[kind]}: {_cut(detail, DETAIL_LIMIT)}"
+        for kind, detail in (problems or {}).items()
+    ]
+    return _cut(" | ".join([words, *parts]), STATUS_LIMIT)
+
+
+def _cut(text: str, limit: int) -> str:
+    text = " ".join(text.split())  # one line, whatever the reason held
+    return text if len(text) <= limit else text[: limit - 3] + "..."
