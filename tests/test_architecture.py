@@ -19,8 +19,8 @@ KASPARCTL_FLOORS: dict[str, int] = {
     "kasparctl.vocabulary": 1,
     "kasparctl.config": 2,
     "kasparctl.log": 2,
-    "kasparctl.game": 3,
-    "kasparctl.body": 4,
+    "kasparctl.body": 3,
+    "kasparctl.game": 4,
     "kasparctl.sim": 5,
     "kasparctl.service": 5,
     "kasparctl.research": 5,
@@ -102,6 +102,7 @@ def test_every_room_of_the_controller_is_on_the_plan() -> None:
         (Edge("hal.voice.api", "hal.voice.speaker", 1), "an interface imports an implementation"),
         (Edge("kasparctl.game.machine", "hal.servos.joints", 1), "outside a factory"),
         (Edge("kasparctl.game.machine", "kasparctl.sim.demo", 1), "its own floor or above"),
+        (Edge("kasparctl.body.player", "kasparctl.game.machine", 1), "its own floor or above"),
         (Edge("kasparctl.research.tidy", "kasparctl.sim.demo", 1), "its own floor or above"),
     ],
 )
