@@ -133,6 +133,7 @@ def simulate_group(
                 learned=progress.learned,
                 final_q=tuple(float(q) for q in table[target]),
                 entropy_after=entropy_bits(softmax(table[target], params.beta, candidates)),
+                candidates=int(candidates.sum()),
             )
         )
     return records
