@@ -25,6 +25,8 @@ COMMAND_MODULES = (
     "sessions",
     "export",
     "report",
+    "replicate",
+    "fit_teacher",
 )
 
 
