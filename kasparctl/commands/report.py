@@ -12,10 +12,12 @@ need matplotlib: pip install 'kasparctl[report]'.
 from __future__ import annotations
 
 import argparse
+import csv
 import io
 import sys
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from kasparctl.game.phrases import PhraseError, load_phrasebook
 from kasparctl.research.children import Children
@@ -30,6 +32,7 @@ from kasparctl.research.inference import (
 )
 from kasparctl.research.output import (
     OutputError,
+    atomic_file,
     check_outputs,
     private_directory,
     write_bytes,
@@ -129,16 +132,12 @@ def run(arguments: argparse.Namespace) -> int:
         contrasts = condition_contrasts(conditions, arguments.cluster, replicates, seed)
         measured = list(children.by_key.values())
         contrasts += attribute_contrasts(measured, participants, replicates, seed)
-        child_rows = [
-            {
-                **row,
-                **{
-                    f"participant_{column}": value
-                    for column, value in participants.attributes(row["participant"]).items()
-                },
-            }
-            for row in children.rows()
-        ]
+
+        def joined(coded_only: bool) -> Iterator[dict[str, Any]]:
+            for row in children.rows(coded_only):
+                attributes = participants.attributes(row["participant"])
+                yield {**row, **{f"participant_{c}": v for c, v in attributes.items()}}
+
         private_directory(out)
         data = FigureData(conditions, found, bands, measured, participants, contrasts)
         drawn = draw_all(data, out)
@@ -148,14 +147,15 @@ def run(arguments: argparse.Namespace) -> int:
             found,
             Method(replicates, seed, arguments.cluster),
             contrasts,
-            child_rows,
+            list(joined(coded_only=True)),
             arguments.participants,
         )
         summary["figures"] = drawn.names
         summary["notes"] = drawn.notes
         write_json(out / "summary.json", summary)
         write_bytes(out / "summary.md", markdown(summary, drawn.names, drawn.notes).encode("utf-8"))
-        write_bytes(out / "children.csv", _csv(child_rows))
+        with atomic_file(out / "children.csv") as stream:
+            _write_children(stream, joined(coded_only=False))
     except (
         SourceError,
         FiguresUnavailable,
@@ -177,13 +177,17 @@ def run(arguments: argparse.Namespace) -> int:
     return 0
 
 
-def _csv(rows: list[dict[str, Any]]) -> bytes:
-    import csv
-
-    buffer = io.StringIO()
-    header = list(rows[0]) if rows else ["child"]
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(header)
+def _write_children(stream: BinaryIO, rows: Iterator[dict[str, Any]]) -> None:
+    """children.csv: every child's measures, one row at a time."""
+    text = io.TextIOWrapper(stream, encoding="utf-8", newline="")
+    writer = csv.writer(text, lineterminator="\n")
+    header: list[str] | None = None
     for row in rows:
+        if header is None:
+            header = list(row)
+            writer.writerow(header)
         writer.writerow([cell(row.get(column)) for column in header])
-    return buffer.getvalue().encode("utf-8")
+    if header is None:
+        writer.writerow(["child"])
+    text.flush()
+    text.detach()

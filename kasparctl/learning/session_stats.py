@@ -86,7 +86,9 @@ class ProblemBuilder:
         self.params = params
         self.group = group
         self._trials: dict[int, list[TrialRecord]] = {}
-        self._last: dict[int, RecordedTrial] = {}
+        # Of each target's last trial, only what the problem's end needs: was it learned
+        # (and with which label), the labels offered and the Q row after it.
+        self._last: dict[int, tuple[int | None, tuple[str, ...], tuple[float, ...]]] = {}
         self._candidates: dict[int, int] = {}
 
     def add(self, trial: RecordedTrial) -> None:
@@ -101,17 +103,20 @@ class ProblemBuilder:
             )
         )
         self._candidates.setdefault(target, len(trial.candidates))
-        self._last[target] = trial
+        self._last[target] = (
+            trial.choice_index if trial.learned else None,
+            tuple(trial.candidates),
+            tuple(trial.q_after),
+        )
 
     def problems(self) -> list[ProblemRecord]:
         """One ProblemRecord per target the session guessed at, in the order it did."""
         toys = self.toys
         problems = []
         for target, trials in self._trials.items():
-            last = self._last[target]
-            learned = last.choice_index if last.learned else None
-            candidates = np.array([toy in last.candidates for toy in toys])
-            q_after = np.array(last.q_after, dtype=np.float64)
+            learned, offered, last_q = self._last[target]
+            candidates = np.array([toy in offered for toy in toys])
+            q_after = np.array(last_q, dtype=np.float64)
             answer = (
                 toys.index(self.answer_key[target]) if 0 <= target < len(self.answer_key) else None
             )

@@ -18,6 +18,7 @@ Measures, per child:
 from __future__ import annotations
 
 import statistics
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,7 +28,7 @@ from kasparctl.research.catalogue import SessionData
 SILENT = "silent"
 
 
-@dataclass
+@dataclass(slots=True)
 class Feedback:
     """Answers checked against the answer key, and the wrong ones by kind."""
 
@@ -55,11 +56,14 @@ class Feedback:
 
     def merge(self, other: Feedback) -> None:
         """Add another tally to this one."""
-        for name in self.__dataclass_fields__:
+        for name in _FEEDBACK_FIELDS:
             setattr(self, name, getattr(self, name) + getattr(other, name))
 
 
-@dataclass
+_FEEDBACK_FIELDS = tuple(Feedback.__dataclass_fields__)
+
+
+@dataclass(slots=True)
 class ChildMeasures:
     """One child's answers and what happened around them."""
 
@@ -151,10 +155,14 @@ class Children:
         others = sorted(seen - set(order) - {SILENT})
         return known + others + ([SILENT] if SILENT in seen else [])
 
-    def rows(self) -> list[dict[str, Any]]:
-        """One row per child: participants by code first, then the rest by group and place."""
+    def rows(self, coded_only: bool = False) -> Iterator[dict[str, Any]]:
+        """One row per child, made as it is asked for: participants by code first, then the
+        rest by session and place (`coded_only`: participants only)."""
         bands = self.bands()
         ordered = sorted(
             self.by_key.values(), key=lambda c: (c.participant is None, c.label, c.key)
         )
-        return [child.row(bands) for child in ordered]
+        for child in ordered:
+            if coded_only and child.participant is None:
+                break
+            yield child.row(bands)

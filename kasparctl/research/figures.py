@@ -41,6 +41,12 @@ PANELS_PER_ROW = 4
 FEW_PROBLEMS = 5
 # Bars of the per-child figure: more than this many children are shown in several rows.
 CHILDREN_PER_ROW = 40
+# At most this many n labels under Fig. 2, and bars in the trials-to-learn histogram.
+MAX_LABELLED_GUESSES = 32
+# Beyond this many guesses Fig. 2 draws its lines without a marker per point.
+MAX_MARKED_GUESSES = 100
+MAX_PLOTTED_GUESSES = 500
+MAX_BINS = 32
 
 
 class FiguresUnavailable(Exception):
@@ -119,6 +125,7 @@ def drawn_texts(figure: Any) -> list[Any]:
 
     renderer.draw_text = recording
     try:
+        # A full draw: the layout is made, then every artist draws what it shows.
         figure.draw(renderer)
     finally:
         del renderer.draw_text
@@ -127,7 +134,6 @@ def drawn_texts(figure: Any) -> list[Any]:
 
 def clipped_texts(figure: Any, tolerance: float = 0.5) -> list[str]:
     """The texts of a drawn figure that reach outside it, or outside the axes clipping them."""
-    figure.canvas.draw()
     renderer = figure.canvas.get_renderer()
     bounds = figure.bbox
     found = []
@@ -201,6 +207,9 @@ def entropy_by_trial(data: FigureData) -> tuple[Any, str]:
         {p.record.candidates for c in conditions for p in c.problems if p.record.candidates > 1}
     ) or [max(len(p.toys) for c in conditions for p in c.problems)]
     top = math.log2(max(candidates)) * 1.08
+    # Problems the game gives up at 30 guesses have at most 30 points; longer ones (a
+    # configured limit far higher) get their n every few guesses, so labels never pile up.
+    label_every = max(1, math.ceil(longest / MAX_LABELLED_GUESSES))
     figure = _figure(8.0, 5.4 + 0.22 * len(conditions))
     grid = figure.add_gridspec(2, 1, height_ratios=[4.2, 0.5 + 0.25 * len(conditions)])
     axes = figure.add_subplot(grid[0])
@@ -238,21 +247,37 @@ def entropy_by_trial(data: FigureData) -> tuple[Any, str]:
         ks = np.arange(1, len(means) + 1)
         lows = [e.low if e.low is not None else e.value for e in found.entropy_by_trial]
         highs = [e.high if e.high is not None else e.value for e in found.entropy_by_trial]
-        axes.fill_between(ks, lows, highs, color=colour, alpha=0.18, linewidth=0, zorder=2)
-        label = f"{_short(condition.label)} ({condition.stats.problems} problems)"
-        axes.plot(ks, means, color=colour, linewidth=1.5, label=label, zorder=3)
-        solid = np.array(ns) >= FEW_PROBLEMS
-        axes.plot(ks[solid], np.array(means)[solid], "o", color=colour, markersize=4, zorder=4)
-        axes.plot(
-            ks[~solid],
-            np.array(means)[~solid],
-            "o",
-            markerfacecolor="white",
-            markeredgecolor=colour,
-            markersize=4,
-            zorder=4,
+        # A line of tens of thousands of points costs Agg hundreds of megabytes: beyond
+        # MAX_PLOTTED_GUESSES, every few guesses are drawn (the figure says so).
+        shown = np.unique(
+            np.linspace(0, len(ks) - 1, min(len(ks), MAX_PLOTTED_GUESSES)).astype(int)
         )
-        for k, n in zip(ks, ns, strict=True):
+        axes.fill_between(
+            ks[shown],
+            np.array(lows, dtype=float)[shown],
+            np.array(highs, dtype=float)[shown],
+            color=colour,
+            alpha=0.18,
+            linewidth=0,
+            zorder=2,
+        )
+        label = f"{_short(condition.label)} ({condition.stats.problems} problems)"
+        axes.plot(
+            ks[shown], np.array(means)[shown], color=colour, linewidth=1.5, label=label, zorder=3
+        )
+        if len(ks) <= MAX_MARKED_GUESSES:
+            solid = np.array(ns) >= FEW_PROBLEMS
+            axes.plot(ks[solid], np.array(means)[solid], "o", color=colour, markersize=4, zorder=4)
+            axes.plot(
+                ks[~solid],
+                np.array(means)[~solid],
+                "o",
+                markerfacecolor="white",
+                markeredgecolor=colour,
+                markersize=4,
+                zorder=4,
+            )
+        for k, n in list(zip(ks, ns, strict=True))[::label_every]:
             counts_axes.text(k, row, str(n), ha="center", va="center", fontsize=7, color=colour)
     axes.set_xlim(0.5, longest + 2.6)
     axes.set_ylim(0, top)
@@ -266,7 +291,12 @@ def entropy_by_trial(data: FigureData) -> tuple[Any, str]:
     counts_axes.set_yticks(
         range(len(conditions)), [_short(c.label, 22) for c in conditions], fontsize=7
     )
-    counts_axes.set_xlabel("guess within a problem (n: problems with that guess)")
+    thinned = longest > MAX_PLOTTED_GUESSES
+    counts_axes.set_xlabel(
+        "guess within a problem (n: problems with that guess"
+        + (f", shown every {label_every} guesses" if label_every > 1 else "")
+        + (f"; lines through {MAX_PLOTTED_GUESSES} of the guesses)" if thinned else ")")
+    )
     counts_axes.tick_params(left=False)
     for side in ("top", "right", "left"):
         counts_axes.spines[side].set_visible(False)
@@ -355,6 +385,8 @@ def trials_to_learn(data: FigureData) -> tuple[Any, str]:
         return None, "no problem was learned"
     low = min(min(c) for c in counts if c)
     high = max(max(c) for c in counts if c)
+    if high - low + 1 > MAX_BINS:
+        return _wide_trials_to_learn(conditions, counts, low, high)
     bins = np.arange(low, high + 1)
     figure = _figure(8.0, 4.6)
     axes = figure.add_subplot()
@@ -413,6 +445,42 @@ def trials_to_learn(data: FigureData) -> tuple[Any, str]:
     return figure, ""
 
 
+def _wide_trials_to_learn(
+    conditions: Sequence[Condition], counts: list[list[int]], low: int, high: int
+) -> tuple[Any, str]:
+    """Trials to learn over a range too wide for a bar per value: MAX_BINS equal bins."""
+    edges = np.linspace(low, high + 1, MAX_BINS + 1)
+    figure = _figure(9.0, 4.6)
+    axes = figure.add_subplot()
+    colours = _colours(len(conditions))
+    centres = (edges[:-1] + edges[1:]) / 2
+    width = (edges[1] - edges[0]) * 0.8 / len(conditions)
+    tallest = 0.0
+    for index, (condition, values) in enumerate(zip(conditions, counts, strict=True)):
+        if not values:
+            continue
+        tally, _ = np.histogram(values, bins=edges)
+        shares = 100.0 * tally / len(values)
+        tallest = max(tallest, float(shares.max()))
+        offset = (index - (len(conditions) - 1) / 2) * width
+        axes.bar(
+            centres + offset,
+            shares,
+            width=width,
+            color=colours[index],
+            label=f"{_short(condition.label)} (n={len(values)} learned)",
+        )
+        for x, n, share in zip(centres + offset, tally, shares, strict=True):
+            if n:
+                axes.text(x, share + 0.8, str(n), ha="center", va="bottom", fontsize=6)
+    axes.set_ylim(0, max(tallest * 1.18, 5.0))
+    axes.set_xlabel(f"trials to learn, in {MAX_BINS} bins of {edges[1] - edges[0]:.0f}")
+    axes.set_ylabel("learned problems (%)")
+    axes.set_title("Trials to learn: share of learned problems; count on each bar", fontsize=10)
+    axes.legend(fontsize=7)
+    return figure, ""
+
+
 def wilson(right: int, total: int, z: float = 1.959964) -> tuple[float, float]:
     """The Wilson 95 % interval of a share right/total (0 to 1)."""
     if total == 0:
@@ -462,8 +530,8 @@ def _feedback_by_participant(
             share = f.right / f.checked
             low, high = wilson(f.right, f.checked)
             shares.append(100 * share)
-            below.append(100 * (share - low))
-            above.append(100 * (high - share))
+            below.append(max(100 * (share - low), 0.0))
+            above.append(max(100 * (high - share), 0.0))
             level = (
                 str(participants.attributes(child.participant).get(attribute))
                 if attribute
@@ -511,8 +579,9 @@ def _feedback_by_position(conditions: Sequence[Condition]) -> tuple[Any, str]:
         mine = [p for p in positions if p in tally]
         shares = [100 * tally[p].right / tally[p].checked for p in mine]
         intervals = [wilson(tally[p].right, tally[p].checked) for p in mine]
-        below = [s - 100 * low for s, (low, _) in zip(shares, intervals, strict=True)]
-        above = [100 * high - s for s, (_, high) in zip(shares, intervals, strict=True)]
+        # Rounding can put a share a hair outside its own interval: never a negative bar.
+        below = [max(s - 100 * low, 0.0) for s, (low, _) in zip(shares, intervals, strict=True)]
+        above = [max(100 * high - s, 0.0) for s, (_, high) in zip(shares, intervals, strict=True)]
         bars = axes.bar(
             [p + offset for p in mine],
             shares,

@@ -166,12 +166,25 @@ def cluster_totals(condition: Condition, longest: int | None = None) -> ClusterT
     )
 
 
-def resample_weights(clusters: int, replicates: int, rng: np.random.Generator) -> FloatArray:
-    """How many times each cluster is drawn in each resample: (replicates, clusters)."""
+# Resamples are drawn and reduced this many at a time, and statistics this many columns at
+# a time: memory stays at (batch x clusters) + (replicates x block), whatever the study.
+BATCH = 250
+BLOCK = 256
+
+
+def _batch_seeds(replicates: int, seed: int, salt: str) -> list[np.random.SeedSequence]:
+    """One seed per batch of resamples: the same resamples for every column of a statistic."""
+    batches = -(-replicates // BATCH)
+    return np.random.SeedSequence([seed, _stable_hash(salt)]).spawn(batches)
+
+
+def _weights(clusters: int, count: int, seed: np.random.SeedSequence) -> FloatArray:
+    """How many times each cluster is drawn in each of `count` resamples: (count, clusters)."""
     if clusters == 0:
-        return np.zeros((replicates, 0))
+        return np.zeros((count, 0))
+    rng = np.random.default_rng(seed)
     weights: FloatArray = rng.multinomial(
-        clusters, np.full(clusters, 1.0 / clusters), replicates
+        clusters, np.full(clusters, 1.0 / clusters), count
     ).astype(np.float64)
     return weights
 
@@ -182,14 +195,36 @@ def _ratio(numerator: FloatArray, denominator: FloatArray) -> FloatArray:
     return result
 
 
-def _interval(values: FloatArray) -> tuple[float, float] | None:
-    finite = values[np.isfinite(values)]
-    # Too few resamples where the statistic exists: no honest interval.
-    if len(finite) < 0.5 * len(values) or len(finite) == 0:
-        return None
+def _ratio_replicates(
+    numerators: FloatArray,
+    denominators: FloatArray,
+    replicates: int,
+    seeds: list[np.random.SeedSequence],
+) -> FloatArray:
+    """(replicates, columns): each column's ratio of resampled cluster sums."""
+    clusters = numerators.shape[0]
+    out = np.empty((replicates, numerators.shape[1]))
+    for index, seed in enumerate(seeds):
+        start = index * BATCH
+        count = min(BATCH, replicates - start)
+        weights = _weights(clusters, count, seed)
+        out[start : start + count] = _ratio(weights @ numerators, weights @ denominators)
+    return out
+
+
+def _intervals(values: FloatArray) -> list[tuple[float, float] | None]:
+    """Each column's 95 % percentile interval (None where too few resamples have a value)."""
     tail = (1.0 - LEVEL) / 2 * 100
-    low, high = np.percentile(finite, [tail, 100 - tail])
-    return float(low), float(high)
+    found: list[tuple[float, float] | None] = []
+    for column in values.T:
+        finite = column[np.isfinite(column)]
+        # Too few resamples where the statistic exists: no honest interval.
+        if len(finite) == 0 or len(finite) < 0.5 * len(column):
+            found.append(None)
+            continue
+        low, high = np.percentile(finite, [tail, 100 - tail])
+        found.append((float(low), float(high)))
+    return found
 
 
 @dataclass(frozen=True)
@@ -206,15 +241,41 @@ class Estimate:
         return {"value": self.value, "low": self.low, "high": self.high, "clusters": self.clusters}
 
 
-def _estimate(
-    numerator: FloatArray, denominator: FloatArray, weights: FloatArray
-) -> tuple[Estimate, FloatArray]:
-    total = float(denominator.sum())
-    value = float(numerator.sum()) / total if total > 0 else None
-    replicates = _ratio(weights @ numerator, weights @ denominator)
-    interval = _interval(replicates) if len(numerator) >= 2 and value is not None else None
-    low, high = interval if interval else (None, None)
-    return Estimate(value, low, high, len(numerator)), replicates
+def estimates(
+    numerators: FloatArray,
+    denominators: FloatArray,
+    replicates: int,
+    seed: int,
+    salt: str,
+) -> list[Estimate]:
+    """Each column's ratio of sums over clusters (rows), with its cluster-bootstrap interval.
+
+    Columns are resampled a block at a time with the same resamples, so a thousand
+    columns (Fig. 2's guesses) cost no more memory than ten.
+    """
+    clusters, columns = numerators.shape
+    totals = denominators.sum(axis=0)
+    values = [
+        float(numerators[:, j].sum() / totals[j]) if totals[j] > 0 else None for j in range(columns)
+    ]
+    found: list[tuple[float, float] | None] = [None] * columns
+    if clusters >= 2:
+        seeds = _batch_seeds(replicates, seed, salt)
+        for start in range(0, columns, BLOCK):
+            block = slice(start, start + BLOCK)
+            resampled = _ratio_replicates(
+                numerators[:, block], denominators[:, block], replicates, seeds
+            )
+            found[block] = _intervals(resampled)
+    return [
+        Estimate(
+            value,
+            None if interval is None or value is None else interval[0],
+            None if interval is None or value is None else interval[1],
+            clusters,
+        )
+        for value, interval in zip(values, found, strict=True)
+    ]
 
 
 @dataclass(frozen=True)
@@ -226,9 +287,6 @@ class Intervals:
     entropy_by_trial_n: list[int]
     trials_share: list[Estimate]  # share of learned problems per trials-to-learn bin
     trials_bins_start: int
-    # The replicates, kept for contrasts: measure -> (replicates,)
-    replicates: dict[str, FloatArray]
-    cluster_values: dict[str, FloatArray]
 
 
 def intervals(
@@ -236,26 +294,29 @@ def intervals(
 ) -> Intervals:
     """Every measure of a condition with its cluster-bootstrap interval."""
     totals = cluster_totals(condition)
-    rng = np.random.default_rng([seed, _stable_hash(condition.label)])
-    weights = resample_weights(totals.size, replicates, rng)
-    measures: dict[str, Estimate] = {}
-    kept: dict[str, FloatArray] = {}
-    values: dict[str, FloatArray] = {}
-    for measure in MEASURES:
-        numerator, denominator = totals.numerators[measure.name], totals.denominators[measure.name]
-        measures[measure.name], kept[measure.name] = _estimate(numerator, denominator, weights)
-        values[measure.name] = _ratio(numerator, denominator)
-    entropy = [
-        _estimate(totals.entropy_sum[:, k], totals.entropy_count[:, k], weights)[0]
-        for k in range(totals.entropy_sum.shape[1])
-    ]
-    counts = [int(n) for n in totals.entropy_count.sum(axis=0)]
+    salt = condition.label
+    names = [m.name for m in MEASURES]
+    measured = estimates(
+        np.column_stack([totals.numerators[n] for n in names]),
+        np.column_stack([totals.denominators[n] for n in names]),
+        replicates,
+        seed,
+        salt,
+    )
+    entropy = estimates(totals.entropy_sum, totals.entropy_count, replicates, seed, salt)
     learned = totals.denominators["trials_mean"]
-    shares = [
-        _estimate(totals.learned_by_trials[:, b], learned, weights)[0]
-        for b in range(totals.learned_by_trials.shape[1])
-    ]
-    return Intervals(measures, entropy, counts, shares, totals.bins_start, kept, values)
+    bins = totals.learned_by_trials.shape[1]
+    shares = estimates(
+        totals.learned_by_trials,
+        np.repeat(learned[:, None], bins, axis=1),
+        replicates,
+        seed,
+        salt,
+    )
+    counts = [int(n) for n in totals.entropy_count.sum(axis=0)]
+    return Intervals(
+        dict(zip(names, measured, strict=True)), entropy, counts, shares, totals.bins_start
+    )
 
 
 def _stable_hash(text: str) -> int:
@@ -276,24 +337,15 @@ def hedges_g(a: FloatArray, b: FloatArray) -> float | None:
     return float((a.mean() - b.mean()) / math.sqrt(pooled) * correction)
 
 
-def _weighted_g(a: FloatArray, wa: FloatArray, b: FloatArray, wb: FloatArray) -> FloatArray:
-    """Hedges' g of resampled clusters: each row of the weights is one resample."""
-
-    def moments(x: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        ok = np.isfinite(x)
-        x, w = x[ok], w[:, ok]
-        n = w.sum(axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            mean = (w @ x) / n
-            var = (w @ (x * x) - n * mean * mean) / (n - 1)
-        return n, mean, var
-
-    na, ma, va = moments(a, wa)
-    nb, mb, vb = moments(b, wb)
+def _moments(values: FloatArray, weights: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per resample and column: count, mean and variance of the drawn clusters' own values."""
+    present = np.isfinite(values).astype(np.float64)
+    filled = np.nan_to_num(values)
+    n = weights @ present
     with np.errstate(divide="ignore", invalid="ignore"):
-        pooled = ((na - 1) * va + (nb - 1) * vb) / (na + nb - 2)
-        g: FloatArray = (ma - mb) / np.sqrt(pooled) * (1 - 3 / (4 * (na + nb) - 9))
-    return np.where(pooled > 1e-15, g, np.nan)
+        mean = (weights @ filled) / n
+        variance = (weights @ (filled * filled) - n * mean * mean) / (n - 1)
+    return n, mean, variance
 
 
 @dataclass(frozen=True)
@@ -333,44 +385,77 @@ class Contrast:
         }
 
 
+Side = tuple[FloatArray, FloatArray]  # (clusters x measures) numerators, denominators
+
+
 def compare(
     factor: str,
     labels: tuple[str, str],
-    measure: str,
-    samples: tuple[tuple[FloatArray, FloatArray], tuple[FloatArray, FloatArray]],
+    measures: Sequence[str],
+    sides: tuple[Side, Side],
     unit: str,
     replicates: int,
     seed: int,
-) -> Contrast:
-    """Contrast A - B of a ratio measure, from each side's per-cluster (numerator, denominator)."""
-    rng = np.random.default_rng([seed, _stable_hash(f"{factor}:{labels[0]}:{labels[1]}:{measure}")])
-    (num_a, den_a), (num_b, den_b) = samples
-    wa = resample_weights(len(num_a), replicates, rng)
-    wb = resample_weights(len(num_b), replicates, rng)
-    a, ra = _estimate(num_a, den_a, wa)
-    b, rb = _estimate(num_b, den_b, wb)
-    value = None if a.value is None or b.value is None else a.value - b.value
-    both = len(num_a) >= 2 and len(num_b) >= 2 and value is not None
-    interval = _interval(ra - rb) if both else None
-    values_a, values_b = _ratio(num_a, den_a), _ratio(num_b, den_b)
-    g = hedges_g(values_a, values_b)
-    g_interval = _interval(_weighted_g(values_a, wa, values_b, wb)) if g is not None else None
-    low, high = interval or (None, None)
-    g_low, g_high = g_interval or (None, None)
-    both_sides = len(num_a) + len(num_b)
-    return Contrast(
-        factor,
-        labels[0],
-        labels[1],
-        measure,
-        a.value,
-        b.value,
-        Estimate(value, low, high, both_sides),
-        Estimate(g, g_low, g_high, both_sides),
-        unit,
-        len(num_a),
-        len(num_b),
-    )
+) -> list[Contrast]:
+    """Contrasts A - B of ratio measures, from each side's per-cluster sums.
+
+    Each side's clusters are resampled on their own (batch by batch); the
+    difference of the ratios and Hedges' g of the clusters' own values get
+    their 95 % percentile intervals from the same resamples.
+    """
+    (num_a, den_a), (num_b, den_b) = sides
+    ka, kb = num_a.shape[0], num_b.shape[0]
+    value_a = _ratio(num_a.sum(axis=0), den_a.sum(axis=0))
+    value_b = _ratio(num_b.sum(axis=0), den_b.sum(axis=0))
+    own_a, own_b = _ratio(num_a, den_a), _ratio(num_b, den_b)
+    g = [hedges_g(own_a[:, j], own_b[:, j]) for j in range(len(measures))]
+    differences = np.full((replicates, len(measures)), np.nan)
+    gs = np.full((replicates, len(measures)), np.nan)
+    if ka >= 2 and kb >= 2:
+        salt = f"{factor}:{labels[0]}:{labels[1]}"
+        seeds_a = _batch_seeds(replicates, seed, salt + ":a")
+        seeds_b = _batch_seeds(replicates, seed, salt + ":b")
+        for index, (seed_a, seed_b) in enumerate(zip(seeds_a, seeds_b, strict=True)):
+            start = index * BATCH
+            count = min(BATCH, replicates - start)
+            wa, wb = _weights(ka, count, seed_a), _weights(kb, count, seed_b)
+            rows = slice(start, start + count)
+            differences[rows] = _ratio(wa @ num_a, wa @ den_a) - _ratio(wb @ num_b, wb @ den_b)
+            na, ma, va = _moments(own_a, wa)
+            nb, mb, vb = _moments(own_b, wb)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                pooled = ((na - 1) * va + (nb - 1) * vb) / (na + nb - 2)
+                effect = (ma - mb) / np.sqrt(pooled) * (1 - 3 / (4 * (na + nb) - 9))
+            gs[rows] = np.where(pooled > 1e-15, effect, np.nan)
+    difference_intervals = _intervals(differences)
+    g_intervals = _intervals(gs)
+    contrasts = []
+    for j, measure in enumerate(measures):
+        a_value = None if np.isnan(value_a[j]) else float(value_a[j])
+        b_value = None if np.isnan(value_b[j]) else float(value_b[j])
+        difference = None if a_value is None or b_value is None else a_value - b_value
+        low, high = difference_intervals[j] or (None, None)
+        g_low, g_high = g_intervals[j] or (None, None)
+        if difference is None:
+            low = high = None
+        if g[j] is None:
+            g_low = g_high = None
+        contrasts.append(
+            Contrast(
+                factor,
+                labels[0],
+                labels[1],
+                measure,
+                a_value,
+                b_value,
+                Estimate(difference, low, high, ka + kb),
+                Estimate(g[j], g_low, g_high, ka + kb),
+                unit,
+                ka,
+                kb,
+            )
+        )
+    return contrasts
 
 
 # The measures contrasted between conditions: the learner's, and the children's answers.
@@ -390,30 +475,31 @@ def condition_contrasts(
     """Every pair of conditions that differ in one factor: uncertainty mode, or learner profile."""
     contrasts = []
     totals = {c.label: cluster_totals(c) for c in conditions}
+
+    def side(label: str) -> Side:
+        t = totals[label]
+        return (
+            np.column_stack([t.numerators[m] for m in CONDITION_MEASURES]),
+            np.column_stack([t.denominators[m] for m in CONDITION_MEASURES]),
+        )
+
     for index, first in enumerate(conditions):
         for second in conditions[index + 1 :]:
             factor = _one_factor(first, second)
             if factor is None:
                 continue
-            a, b = (first, second)
+            a, b = first, second
             if factor == "uncertainty mode" and a.factors and not a.factors.spoken:
                 a, b = b, a  # spoken - silent
-            for measure in CONDITION_MEASURES:
-                ta, tb = totals[a.label], totals[b.label]
-                contrasts.append(
-                    compare(
-                        factor,
-                        (a.label, b.label),
-                        measure,
-                        (
-                            (ta.numerators[measure], ta.denominators[measure]),
-                            (tb.numerators[measure], tb.denominators[measure]),
-                        ),
-                        unit,
-                        replicates,
-                        seed,
-                    )
-                )
+            contrasts += compare(
+                factor,
+                (a.label, b.label),
+                CONDITION_MEASURES,
+                (side(a.label), side(b.label)),
+                unit,
+                replicates,
+                seed,
+            )
     return contrasts
 
 
@@ -477,31 +563,23 @@ def attribute_contrasts(
         names = sorted(levels)
         if not 2 <= len(names) <= max_levels:
             continue
-        sums = {name: [_child_sums(child) for child in levels[name]] for name in names}
+
+        def side(level: str, levels: dict[str, list[ChildMeasures]] = levels) -> Side:
+            sums = [_child_sums(child) for child in levels[level]]
+            return (
+                np.array([[float(c[m][0]) for m in CHILD_MEASURES] for c in sums]),
+                np.array([[float(c[m][1]) for m in CHILD_MEASURES] for c in sums]),
+            )
+
         for index, a in enumerate(names):
             for b in names[index + 1 :]:
-                for measure in CHILD_MEASURES:
-
-                    def side(
-                        level: str,
-                        measure: str = measure,
-                        sums: dict[str, list[dict[str, tuple[float, float]]]] = sums,
-                    ) -> tuple[FloatArray, FloatArray]:
-                        pairs = [child[measure] for child in sums[level]]
-                        return (
-                            np.array([float(n) for n, _ in pairs]),
-                            np.array([float(d) for _, d in pairs]),
-                        )
-
-                    contrasts.append(
-                        compare(
-                            f"participant {attribute}",
-                            (a, b),
-                            measure,
-                            (side(a), side(b)),
-                            "child",
-                            replicates,
-                            seed,
-                        )
-                    )
+                contrasts += compare(
+                    f"participant {attribute}",
+                    (a, b),
+                    CHILD_MEASURES,
+                    (side(a), side(b)),
+                    "child",
+                    replicates,
+                    seed,
+                )
     return contrasts

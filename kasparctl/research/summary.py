@@ -356,8 +356,8 @@ def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[st
         lines += [
             "## Children",
             "",
-            "By participant code where the plans have codes, else by group and place in the "
-            "turn order. Every measure and attribute is in children.csv.",
+            "By participant code (the plans' codes). Every measure and attribute, and the "
+            "children of sessions without codes (by session and place), are in children.csv.",
             "",
         ]
         lines += [*_children_table(summary["children"]), ""]
