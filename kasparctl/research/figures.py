@@ -31,6 +31,7 @@ from kasparctl.research.conditions import Condition
 from kasparctl.research.inference import MEASURES, Contrast, Intervals
 from kasparctl.research.output import write_bytes
 from kasparctl.research.participants import NO_PARTICIPANTS, Participants
+from kasparctl.research.summary import plural
 
 INSTALL_HINT = "pip install 'kasparctl[report]'"
 FORMATS = ("png", "svg")
@@ -552,7 +553,7 @@ def _feedback_by_participant(
         axes.set_ylim(0, 100)
         axes.set_ylabel("answers agreeing with\nthe answer key (%)", fontsize=8)
     grid[0].set_title(
-        "Feedback accuracy per participant (95 % Wilson interval; n: answers checked)",
+        "Feedback accuracy per participant\n(95 % Wilson interval; n: answers checked)",
         fontsize=10,
     )
     if attribute:
@@ -638,10 +639,13 @@ def contrasts(found: Sequence[Contrast]) -> tuple[Any, str]:
         if g.low is not None and g.high is not None:
             axes.plot([g.low, g.high], [row, row], color=colour, linewidth=1.2)
         axes.plot([g.value], [row], "o", color=colour, markersize=4)
+        prefix = (
+            contrast.factor.removeprefix("participant ") + " " if contrast.unit == "child" else ""
+        )
         labels.append(
-            f"{_short(contrast.a, 20)} - {_short(contrast.b, 20)}: "
+            f"{prefix}{_short(contrast.a, 20)} - {_short(contrast.b, 20)}: "
             f"{_LABELS.get(contrast.measure, contrast.measure)} "
-            f"({contrast.clusters_a}/{contrast.clusters_b} {contrast.unit}s)"
+            f"({contrast.clusters_a}/{contrast.clusters_b} {plural(contrast.unit)})"
         )
     axes.axvline(0, color="0.5", linewidth=0.8, linestyle="--")
     axes.set_yticks(range(len(shown)), labels, fontsize=7)

@@ -127,6 +127,11 @@ def _mean_sd(mean: float | None, sd: float | None, digits: int = 2) -> str:
     return "-" if mean is None else f"{mean:.{digits}f} ± {_number(sd, digits)}"
 
 
+def plural(unit: str) -> str:
+    """A cluster unit in the plural: groups, sessions, children."""
+    return "children" if unit == "child" else unit + "s"
+
+
 def percent(value: float) -> str:
     """A share as a percentage to 0.1 % (1 of 440 is 0.2 %, never 0 %)."""
     return f"{100 * value:.1f} %"
@@ -277,7 +282,7 @@ def _contrast_table(contrasts: Sequence[dict[str, Any]]) -> list[str]:
         lines.append(
             f"| {c['factor']} | {c['a']} - {c['b']} | {_MEASURE_LABELS.get(measure, measure)} "
             f"| {_value(measure, c['a_value'])} | {_value(measure, c['b_value'])} "
-            f"| {difference} | {g} | {c['clusters_a']} / {c['clusters_b']} {c['unit']}s |"
+            f"| {difference} | {g} | {c['clusters_a']} / {c['clusters_b']} {plural(c['unit'])} |"
         )
     return lines
 
@@ -338,7 +343,7 @@ def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[st
         f"{len(summary['sessions'])} sessions, {summary['all']['trials_total']} trials, "
         f"{summary['all']['problems']} problems. Trials to learn and final entropies are over "
         "learned problems; undone answers are not trials. In brackets: 95 % intervals, "
-        f"cluster bootstrap over {method['unit']}s ({method['replicates']} resamples, seed "
+        f"cluster bootstrap over {plural(method['unit'])} ({method['replicates']} resamples, seed "
         f"{method['seed']}); none with fewer than two. Definitions: docs/research-data.md.",
         "",
         *("| " + " | ".join(row) + " |" for row in table),
