@@ -12,8 +12,10 @@ worst case for a single command's memory); --sessions N spreads the same
 size over N sessions. Made once into --dir (default a temporary directory,
 removed after) in a few seconds.
 
-Each command runs in its own process; its peak RSS is the kernel's
-ru_maxrss for that process (os.wait4), its time the wall clock.
+Each command runs in its own process; its peak RSS is the kernel's high-water
+mark of that process's memory (VmHWM in /proc/self/status, read as it ends:
+unlike ru_maxrss it does not count the memory of the process it was forked
+from), its time the wall clock.
 """
 
 from __future__ import annotations
@@ -21,7 +23,6 @@ from __future__ import annotations
 import argparse
 import io
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -96,20 +97,32 @@ def make(root: Path, megabytes: float, sessions: int) -> Path:
     return state
 
 
+# Runs `kasparctl ARGV` and, as it ends, writes its peak memory (kB) as the last line of stderr.
+PEAK = """
+import re, sys
+from kasparctl.cli import main
+try:
+    code = main(sys.argv[1:])
+finally:
+    status = open("/proc/self/status").read()
+    print("VmHWM", re.search(r"VmHWM:\\s+(\\d+) kB", status).group(1), file=sys.stderr)
+sys.exit(code)
+"""
+
+
 def measure(argv: list[str]) -> tuple[float, float, int]:
     """(seconds, peak RSS in MB, exit code) of `kasparctl ARGV` in its own process."""
     started = time.perf_counter()
-    process = subprocess.Popen(
-        [sys.executable, "-m", "kasparctl", *argv],
+    result = subprocess.run(
+        [sys.executable, "-c", PEAK, *argv],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
+        text=True,
     )
-    _, status, usage = os.wait4(process.pid, 0)
     elapsed = time.perf_counter() - started
-    assert process.stderr is not None
-    process.stderr.read()
-    process.returncode = os.waitstatus_to_exitcode(status)
-    return elapsed, usage.ru_maxrss / 1024, process.returncode
+    lines = reversed(result.stderr.splitlines())
+    peak = next(int(line.split()[1]) for line in lines if line.startswith("VmHWM"))
+    return elapsed, peak / 1024, result.returncode
 
 
 def bench() -> None:
