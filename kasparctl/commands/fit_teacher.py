@@ -28,7 +28,7 @@ def register(subparsers: Any) -> None:
         help="fit a model of the children's answers from recorded sessions",
         description=__doc__,
     )
-    add_source_arguments(parser)
+    add_source_arguments(parser, condition=True)
     parser.add_argument(
         "--out", required=True, metavar="FILE", help="the teacher model (TOML; '-': stdout)"
     )

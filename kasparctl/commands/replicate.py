@@ -53,7 +53,7 @@ def register(subparsers: Any) -> None:
         help="place a cohort's (or the paper's) figures among simulated studies of its size",
         description=__doc__,
     )
-    add_source_arguments(parser)
+    add_source_arguments(parser, condition=True)
     parser.add_argument(
         "--paper", action="store_true", help="the cohort is the paper's pilot (section IV)"
     )

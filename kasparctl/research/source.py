@@ -32,8 +32,10 @@ class SourceError(Exception):
     """No usable state directory or configuration; the message says what to give."""
 
 
-def add_source_arguments(parser: argparse.ArgumentParser, sessions: bool = True) -> None:
-    """Add SESSION..., --state-dir and --config to a research command's parser."""
+def add_source_arguments(
+    parser: argparse.ArgumentParser, sessions: bool = True, condition: bool = False
+) -> None:
+    """Add SESSION..., --state-dir and --config (and --condition) to a research command."""
     if sessions:
         parser.add_argument(
             "sessions",
@@ -55,6 +57,13 @@ def add_source_arguments(parser: argparse.ArgumentParser, sessions: bool = True)
         help="kaspar.toml whose state_dir and learner profiles to use "
         "(default: $KASPAR_CONFIG or /etc/kaspar/kaspar.toml)",
     )
+    if condition:
+        parser.add_argument(
+            "--condition",
+            default=None,
+            metavar="LABEL",
+            help="only the sessions of this condition (profile/spoken or profile/silent)",
+        )
 
 
 @dataclass(frozen=True)
@@ -133,6 +142,15 @@ def read_sessions(arguments: argparse.Namespace) -> tuple[Source, Catalogue]:
     except CatalogueError as error:
         raise SourceError(str(error)) from error
     catalogue = open_sessions(progress(directories, "reading sessions", "session"))
+    wanted = getattr(arguments, "condition", None)
+    if wanted is not None:
+        conditions = sorted({s.condition for s in catalogue.sessions})
+        if wanted not in conditions:
+            raise SourceError(
+                f"--condition: expected one of {', '.join(conditions) or 'none (no sessions)'}, "
+                f"found {wanted!r}"
+            )
+        catalogue.sessions = [s for s in catalogue.sessions if s.condition == wanted]
     for session in catalogue.sessions:
         for warning in session.warnings:
             # Never silently dropped: a damaged line is data a researcher may be missing.
