@@ -226,6 +226,13 @@ def _fitted(sessions: Any) -> TeacherModel:
     return TeacherModel(children, f"fitted from {len(sessions)} sessions")
 
 
+def _p(p: float, studies: int) -> str:
+    """A Monte Carlo p-value, or how rare when no simulated study was as extreme."""
+    if round(p * (studies + 1)) <= 1:
+        return f"p < {1 / studies:.1g} (none of {studies:,} simulated studies)"
+    return f"p = {p:.4f}"
+
+
 def _print(fits: list[tuple[str, Fit]], as_json: bool) -> None:
     if as_json:
         print(
@@ -251,10 +258,13 @@ def _print(fits: list[tuple[str, Fit]], as_json: bool) -> None:
                 f"{spread:>17} {placed.percentile:>10.1f}% {placed.p:>7.3f}"
             )
         if result.joint_trials_p is not None:
-            print(f"  trials to learn, mean and sd together: p = {result.joint_trials_p:.3f}")
+            print(
+                "  trials to learn, mean and sd together: "
+                + _p(result.joint_trials_p, result.studies)
+            )
         if result.entropy_with_win_shifts_p is not None:
             print(
                 "  final entropy at least the cohort's with at most its win-shifts: "
-                f"p = {result.entropy_with_win_shifts_p:.4f}"
+                + _p(result.entropy_with_win_shifts_p, result.studies)
             )
         print()
