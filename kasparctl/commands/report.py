@@ -141,6 +141,9 @@ def run(arguments: argparse.Namespace) -> int:
         private_directory(out)
         data = FigureData(conditions, found, bands, measured, participants, contrasts)
         drawn = draw_all(data, out)
+        for note in drawn.notes:
+            if note.split(":")[0] in drawn.failed:
+                print(f"warning: {note}", file=sys.stderr)
         summary = build_summary(
             conditions,
             everything,

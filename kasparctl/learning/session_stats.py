@@ -116,6 +116,9 @@ class ProblemBuilder:
         for target, trials in self._trials.items():
             learned, offered, last_q = self._last[target]
             candidates = np.array([toy in offered for toy in toys])
+            if not candidates.any():
+                # A record naming none of the session's toys: over all of them.
+                candidates = np.ones(len(toys), dtype=bool)
             q_after = np.array(last_q, dtype=np.float64)
             answer = (
                 toys.index(self.answer_key[target]) if 0 <= target < len(self.answer_key) else None

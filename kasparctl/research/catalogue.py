@@ -91,6 +91,8 @@ class SessionIndex:
     toys: tuple[str, ...] = ()
     # The most children seen in a turn (child_index + 1), for plans that do not say.
     children_seen: int = 0
+    # Trials whose per-toy lists are not as long as the session's toys (damage).
+    other_width: int = 0
     warnings: list[str] = field(default_factory=list)
 
     @property
@@ -344,9 +346,12 @@ def index_session(directory: Path) -> SessionIndex:
     width = 0
     toys: tuple[str, ...] = ()
     chosen: dict[int, str] = {}
+    widths: dict[int, int] = {}  # per-toy list length -> trials
     for record in iter_records(path, warnings.add):
         index.records += 1
         if isinstance(record, TrialRecord):
+            width_here = len(record.probabilities)
+            widths[width_here] = widths.get(width_here, 0) + 1
             index.trial_records += 1
             index.children_seen = max(index.children_seen, record.child_index + 1)
             width = max(width, len(record.probabilities))
@@ -370,6 +375,12 @@ def index_session(directory: Path) -> SessionIndex:
         # Failing a full guess, positions are named from the choices.
         toys = tuple(chosen.get(i, f"toy {i + 1}") for i in range(width))
     index.toys = toys
+    index.other_width = sum(n for w, n in widths.items() if w != len(toys))
+    if index.other_width:
+        warnings.add(
+            f"{path}: {index.other_width} trials have per-toy lists of another length than "
+            f"the session's {len(toys)} toys; the report leaves them out"
+        )
     index.warnings = warnings.lines()
     return index
 

@@ -140,6 +140,8 @@ def _collect(
             if walked.undone:
                 condition.undone += 1
                 continue
+            if len(record.q_after) != len(toys):
+                continue  # damage the index warned about
             builder.add(record)
             feedback.add(record)
             condition.feedback_by_position.setdefault(record.child_index + 1, Feedback()).add(

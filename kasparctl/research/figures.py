@@ -71,6 +71,8 @@ class Drawn:
     names: list[str] = field(default_factory=list)
     # Figures left out and why ("no answer key"), for the summary.
     notes: list[str] = field(default_factory=list)
+    # Figures whose drawing failed (their note says how).
+    failed: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -101,7 +103,14 @@ def draw_all(data: FigureData, out: Path) -> Drawn:
     require_matplotlib()
     drawn = Drawn()
     for name, draw in figure_table(data).items():
-        figure, note = draw()
+        try:
+            figure, note = draw()
+        except (ValueError, TypeError, IndexError, ZeroDivisionError, OverflowError) as error:
+            # Sessions the tests never imagined must not cost the rest of the report: the
+            # figure is left out and the summary's notes (and stderr) say why.
+            drawn.notes.append(f"{name}: not drawn, {type(error).__name__}: {error}")
+            drawn.failed.append(name)
+            continue
         if figure is None:
             drawn.notes.append(f"{name}: not drawn, {note}")
             continue
@@ -207,7 +216,7 @@ def entropy_by_trial(data: FigureData) -> tuple[Any, str]:
     candidates = sorted(
         {p.record.candidates for c in conditions for p in c.problems if p.record.candidates > 1}
     ) or [max(len(p.toys) for c in conditions for p in c.problems)]
-    top = math.log2(max(candidates)) * 1.08
+    top = max(math.log2(max(candidates)), 0.5) * 1.08
     # Problems the game gives up at 30 guesses have at most 30 points; longer ones (a
     # configured limit far higher) get their n every few guesses, so labels never pile up.
     label_every = max(1, math.ceil(longest / MAX_LABELLED_GUESSES))

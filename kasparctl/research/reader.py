@@ -16,13 +16,14 @@ record is skipped with a warning.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import msgspec
 
-from kasparctl.game.records import AnyRecord
+from kasparctl.game.records import AnyRecord, TrialRecord
 
 # A record is a few kilobytes; a line far longer is damage, skipped without being held.
 MAX_LINE_BYTES = 16 << 20
@@ -99,10 +100,32 @@ def _why_not_json(line: bytes) -> str | None:
     return None if isinstance(value, dict) else "not a JSON object"
 
 
+def _inconsistent(record: AnyRecord) -> str | None:
+    """Why a well-typed record cannot be what the game wrote, or None."""
+    if not isinstance(record, TrialRecord):
+        return None
+    width = len(record.probabilities)
+    if width == 0 or len(record.q_before) != width or len(record.q_after) != width:
+        return (
+            f"per-toy lists of {width}, {len(record.q_before)} and {len(record.q_after)} "
+            "values, expected one length of at least 1"
+        )
+    if not 0 <= record.choice_index < width:
+        return f"choice_index {record.choice_index}, expected 0 to {width - 1}"
+    if record.target_index < 0 or record.child_index < 0:
+        return f"target_index {record.target_index}, child_index {record.child_index}: negative"
+    numbers = (record.entropy, record.reaction_time, record.reward, *record.q_after)
+    if not all(math.isfinite(value) for value in numbers):
+        return "a number that is not finite"
+    return None
+
+
 def _decode(line: bytes) -> tuple[AnyRecord | None, str | None, bool]:
     """(record, None, _) for a record; (None, why, is_json) for a line that is none."""
     try:
-        return _decoder.decode(line), None, True
+        record = _decoder.decode(line)
+        why = _inconsistent(record)
+        return (record, None, True) if why is None else (None, why, True)
     except msgspec.ValidationError as error:
         why = _why_not_json(line)
         return None, (str(error) if why is None else why), why is None
