@@ -69,7 +69,8 @@ def describe_damaged(damaged: Damaged) -> dict[str, Any]:
 def run(arguments: argparse.Namespace) -> int:
     """List every session of the state directories: ids, group, condition, date, status."""
     try:
-        source, catalogue = read_sessions(arguments)
+        # Damaged sessions are part of the listing, not warnings beside it.
+        source, catalogue = read_sessions(arguments, report_damaged=False)
         rows = [describe(session) for session in catalogue.sessions]
         damaged = [describe_damaged(d) for d in catalogue.damaged]
         if arguments.json:

@@ -127,11 +127,14 @@ def _load(path: str) -> Config:
         raise SourceError(str(error)) from error
 
 
-def read_sessions(arguments: argparse.Namespace) -> tuple[Source, Catalogue]:
+def read_sessions(
+    arguments: argparse.Namespace, report_damaged: bool = True
+) -> tuple[Source, Catalogue]:
     """The sessions the command names (all by default); every warning and damage on stderr.
 
-    A session that cannot be read is reported (one line: which file, and why)
-    and left out; the command goes on with every other one.
+    A session that cannot be read is reported (one line: which file, and why;
+    `report_damaged` False for a command that lists it itself) and left out; the
+    command goes on with every other one.
     """
     names = list(getattr(arguments, "sessions", None) or ())
     # Sessions named by their directory need no state directory at all.
@@ -155,7 +158,7 @@ def read_sessions(arguments: argparse.Namespace) -> tuple[Source, Catalogue]:
         for warning in session.warnings:
             # Never silently dropped: a damaged line is data a researcher may be missing.
             print(f"warning: {warning}", file=sys.stderr)
-    for damaged in catalogue.damaged:
+    for damaged in catalogue.damaged if report_damaged else ():
         print(f"warning: session left out, damaged: {damaged.reason}", file=sys.stderr)
     for duplicate in catalogue.duplicates:
         print(f"warning: {duplicate}", file=sys.stderr)
