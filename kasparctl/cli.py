@@ -28,6 +28,8 @@ COMMAND_MODULES = (
     "export",
     "report",
     "watch",
+    "replicate",
+    "fit_teacher",
 )
 
 

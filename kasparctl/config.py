@@ -7,9 +7,11 @@ to a default in front of children.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import re
+import socket
 import tomllib
 import types
 import typing
@@ -55,6 +57,39 @@ class _Settings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only
 # replacing the limits'), "unit" (after a range: "0 to 10 s") and "item" (what a
 # sequence holds: "at least 2 names").
 Name = Annotated[str, msgspec.Meta(pattern=r"\S", extra={"expected": "a name"})]
+# A pseudonymous code for a child or a robot: letters, digits, "-" and "_", starting with a
+# letter or digit, so it is safe in a file name, a CSV cell (never read as a formula) and R.
+CODE_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,31}$"
+Code = Annotated[
+    str,
+    msgspec.Meta(
+        pattern=CODE_PATTERN,
+        extra={"expected": "a code: 1 to 32 letters, digits, '-' or '_', first a letter or digit"},
+    ),
+]
+# Where a robot's default id comes from: systemd's machine id (never used as it is: hashed).
+MACHINE_ID_FILES = (Path("/etc/machine-id"), Path("/var/lib/dbus/machine-id"))
+
+
+def default_robot_id(machine_id_files: tuple[Path, ...] = MACHINE_ID_FILES) -> str:
+    """This computer's robot id: "robot-" and 12 hex digits of a hash of its machine id.
+
+    Stable for as long as the operating system is installed; the machine id
+    itself never leaves the robot (systemd asks applications to hash it). Without
+    a machine id, the host name is hashed instead.
+    """
+    source = ""
+    for path in machine_id_files:
+        try:
+            source = path.read_text(encoding="ascii").strip()
+        except (OSError, UnicodeDecodeError):
+            continue
+        if source:
+            break
+    if not source:
+        source = "host:" + socket.gethostname()
+    digest = hashlib.sha256(b"kaspar robot id\0" + source.encode()).hexdigest()
+    return f"robot-{digest[:12]}"
 
 
 class LoggingSettings(_Settings, frozen=True):
@@ -105,6 +140,9 @@ class LearnerSettings(_Settings, frozen=True):
         return {**BUILTIN_PROFILES, **self.profiles}
 
 
+ExcludeLearned = Literal["names", "always", "never"]
+
+
 class GameSettings(_Settings, frozen=True):
     """The `[game]` table: the variant, its toys or locations, timings and researcher controls."""
 
@@ -126,6 +164,12 @@ class GameSettings(_Settings, frozen=True):
     correct_answers_to_learn: Annotated[int, msgspec.Meta(ge=1)] = 2
     # A target not learned after this many guesses is left to the researcher.
     max_trials_per_target: int = 30
+    # Whether a learned toy is withdrawn from the later targets' choices: "names" (only in
+    # the names game, as the paper's step 4 says; in the pilot every location is a problem
+    # over all the toys, as its Fig. 2 starting at 2.585 bits for every problem says),
+    # "always" (the pilot too: the paper's step-4 elimination across its locations) or
+    # "never". docs/simulation.md compares how well each fits the pilot's figures.
+    exclude_learned_rule: ExcludeLearned = msgspec.field(default="names", name="exclude_learned")
     seed: int | None = None
     # The arm the children move by hand in step 2, and that points at the toys.
     pointing_group: str = "right_arm"
@@ -161,12 +205,15 @@ class GameSettings(_Settings, frozen=True):
 
     @property
     def exclude_learned(self) -> bool:
-        """A learned name is no longer offered for the other bags (names variant only).
+        """Whether a learned label is no longer offered for the other targets.
 
-        In the pilot each location is its own problem over all toys, which is why
-        every problem starts at the paper's log2(6) = 2.585 bits.
+        By `exclude_learned` ("names" by default): in the names game a learned name
+        is withdrawn from the later bags (the paper's step 4); in the pilot each
+        location is its own problem over all toys unless the rule is "always".
         """
-        return self.variant == "names"
+        if self.exclude_learned_rule == "names":
+            return self.variant == "names"
+        return self.exclude_learned_rule == "always"
 
 
 class SessionPlan(_Settings, frozen=True):
@@ -178,6 +225,11 @@ class SessionPlan(_Settings, frozen=True):
     # First names are optional; without them Kaspar says "child one", "child two"...
     children: Annotated[
         tuple[Name, ...], msgspec.Meta(max_length=MAX_CHILDREN, extra={"item": "name"})
+    ] = ()
+    # Pseudonymous codes of the children in turn order ("P07"), stable across sessions: what
+    # links a child's answers over sessions and to the study's participants.csv.
+    participants: Annotated[
+        tuple[Code, ...], msgspec.Meta(max_length=MAX_CHILDREN, extra={"item": "code"})
     ] = ()
     group_size: Annotated[int, msgspec.Meta(ge=1, le=MAX_CHILDREN)] | None = None
     # The correct label for each target, in target order; for research records only.
@@ -201,6 +253,8 @@ class Config(_Settings, frozen=True):
     """The whole of kaspar.toml, every table with its defaults."""
 
     state_dir: str = "/var/lib/kaspar"
+    # Names this robot in every session it records (default: default_robot_id()).
+    robot_id: Code | None = None
     # A directory of phrase files that overrides the shipped ones.
     phrases_dir: str | None = None
     # Poses recorded by demonstration (`kasparctl pose record`), relative to this file.
@@ -221,10 +275,16 @@ class Config(_Settings, frozen=True):
         """A profile's learner (the default profile's without a name); KeyError if unknown."""
         return self.learner.all_profiles()[name or self.learner.default_profile].params()
 
+    def robot(self) -> str:
+        """The robot's id: the configured robot_id, else the one derived from its machine id."""
+        return self.robot_id or default_robot_id()
+
     def group_size(self, plan: SessionPlan) -> int:
-        """How many children a planned session has: its names, its size, else the game's."""
+        """How many children a session has: its names or codes, its size, else the game's."""
         if plan.children:
             return len(plan.children)
+        if plan.participants:
+            return len(plan.participants)
         return plan.group_size or self.game.children_per_group
 
 
@@ -462,7 +522,10 @@ def _type_at(segments: list[str]) -> Any:
     for segment in segments:
         bare = _bare(current)
         if isinstance(bare, type) and issubclass(bare, msgspec.Struct):
-            current = typing.get_type_hints(bare, include_extras=True).get(segment)
+            # A field may have another name in the file than in Python (exclude_learned).
+            names = {f.encode_name: f.name for f in msgspec.structs.fields(bare)}
+            hints = typing.get_type_hints(bare, include_extras=True)
+            current = hints.get(names.get(segment, segment))
         elif typing.get_origin(bare) in (tuple, list, dict):
             current = typing.get_args(bare)[-1 if typing.get_origin(bare) is dict else 0]
         if typing.get_origin(current) in (typing.Union, types.UnionType):
@@ -640,6 +703,15 @@ def _check_plan(plan: SessionPlan, where: str, config: Config, fail: _Fail) -> N
             f"{where}.group_size",
             f"expected {len(plan.children)} (one per name in children), found {plan.group_size}",
         )
+    _check_distinct(plan.participants, f"{where}.participants", fail)
+    if plan.participants:
+        size = len(plan.children) or plan.group_size
+        if size not in (None, len(plan.participants)):
+            what = "name in children" if plan.children else "child of group_size"
+            fail(
+                f"{where}.participants",
+                f"expected {size} codes (one per {what}), found {len(plan.participants)}",
+            )
     if plan.answer_key:
         _check_answer_key(plan.answer_key, config.game, f"{where}.answer_key", fail)
 

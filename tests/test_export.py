@@ -42,12 +42,13 @@ def export(study: Study, tmp_path: Path, *extra: str) -> tuple[list[str], list[d
     return read_csv(out)
 
 
-def expand(columns: list[str]) -> list[str]:
-    """Documented names with "<toy>" written out for the demo's toys."""
+def expand(columns: list[str], attributes: tuple[str, ...] = ()) -> list[str]:
+    """Documented names with "<toy>" written out for the demo's toys, "<attribute>" for
+    participants.csv's columns (none without --participants)."""
     return [
-        name.replace("<toy>", toy)
+        name.replace("<toy>", part).replace("<attribute>", part)
         for name in columns
-        for toy in (TOYS if "<toy>" in name else [""])
+        for part in (TOYS if "<toy>" in name else attributes if "<attribute>" in name else [""])
     ]
 
 
@@ -70,7 +71,7 @@ def test_one_row_per_trial_record_and_undone_ones_marked(
     _, rows = export(study, tmp_path)
     for session in study.planned:
         records = raw_records(study.state_dir / "sessions" / session)
-        mine = [r for r in rows if r["session"] == session]
+        mine = [r for r in rows if r["session_name"] == session]
         assert len(mine) == sum(1 for r in records if r["kind"] == "trial")
         counted = [r for r in mine if r["undone"] == "FALSE"]
         assert len(counted) == len(counted_trials(records))
@@ -89,7 +90,7 @@ def test_columns_and_types_are_as_documented(study: Study, tmp_path: Path) -> No
             for row in rows:
                 value = row[name]
                 if value == "":
-                    assert column.empty_when != "never", (name, row["session"], row["trial"])
+                    assert column.empty_when != "never", (name, row["session_name"], row["trial"])
                     continue
                 assert is_type(value, column.type), (name, value)
     # Silent sessions have no band; spoken ones always do.
@@ -99,7 +100,7 @@ def test_columns_and_types_are_as_documented(study: Study, tmp_path: Path) -> No
 
 def test_values_are_the_records_own(study: Study, tmp_path: Path) -> None:
     _, rows = export(study, tmp_path)
-    by_key = {(r["session"], int(r["trial"])): r for r in rows}
+    by_key = {(r["session_name"], int(r["trial"])): r for r in rows}
     for session, planned in study.planned.items():
         for trial in (
             r for r in raw_records(study.state_dir / "sessions" / session) if r["kind"] == "trial"
@@ -141,10 +142,10 @@ def test_named_sessions_by_id_or_directory(study: Study, tmp_path: Path) -> None
     arguments = ["export", first, str(study.state_dir / "sessions" / second), "--csv", str(out)]
     assert main([*arguments, "--state-dir", str(study.state_dir)]) == 0
     _, rows = read_csv(out)
-    assert {r["session"] for r in rows} == {first, second}
+    assert {r["session_name"] for r in rows} == {first, second}
     # Given as directories only, sessions need no state directory.
     assert main(["export", str(study.state_dir / "sessions" / second), "--csv", str(out)]) == 0
-    assert {r["session"] for r in read_csv(out)[1]} == {second}
+    assert {r["session_name"] for r in read_csv(out)[1]} == {second}
 
 
 def test_an_unknown_session_is_named(study: Study, tmp_path: Path, capsys) -> None:
@@ -170,7 +171,7 @@ def test_events_hold_every_other_record_as_documented(study: Study, tmp_path: Pa
     for session in study.planned:
         records = raw_records(study.state_dir / "sessions" / session)
         others = [r for r in records if r["kind"] != "trial"]
-        assert [int(r["seq"]) for r in rows if r["session"] == session] == [
+        assert [int(r["seq"]) for r in rows if r["session_name"] == session] == [
             r["seq"] for r in others
         ]
     kinds = {(r["kind"], r["name"]) for r in rows}
@@ -184,7 +185,7 @@ def test_events_hold_every_other_record_as_documented(study: Study, tmp_path: Pa
 def test_the_csv_can_go_to_stdout(study: Study, capsys) -> None:
     assert main(["export", "--state-dir", str(study.state_dir), "--csv", "-"]) == 0
     captured = capsys.readouterr()
-    assert captured.out.startswith("session,group,condition,")
+    assert captured.out.startswith("session,session_name,robot,group,condition,")
     assert "trials from 6 sessions" in captured.err
 
 

@@ -254,12 +254,14 @@ def test_records_hold_no_personal_data_beyond_the_plan(
             # A string value that is a single capitalised word is taken for a name.
             if isinstance(value, str) and FIRST_NAME_LIKE.fullmatch(value):
                 assert value in PLAN_NAMES, f"{where}: {path} = {value!r} looks like a name"
-    # The plan keeps the names it was given and nothing else about the children.
+    # The plan keeps the names it was given and nothing else about the children
+    # (their pseudonymous participant codes, if planned: attributes live elsewhere).
     assert set(plan["plan"]) <= {
         "group",
         "profile",
         "speak_uncertainty",
         "children",
+        "participants",
         "group_size",
         "answer_key",
     }

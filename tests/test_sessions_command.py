@@ -19,7 +19,7 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> Study:
 def test_json_lists_every_session_with_status_trials_and_condition(study: Study, capsys) -> None:
     assert main(["sessions", "--state-dir", str(study.state_dir), "--json"]) == 0
     out, err = capsys.readouterr()
-    listed = {row["session"]: row for row in json.loads(out)}
+    listed = {row["session_name"]: row for row in json.loads(out)}
     assert set(listed) == set(study.planned)
     for session, planned in study.planned.items():
         row = listed[session]
@@ -41,7 +41,9 @@ def test_table_has_one_line_per_session(study: Study, capsys) -> None:
     assert main(["sessions", "--state-dir", str(study.state_dir)]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split() == [
+        "session_name",
         "session",
+        "robot",
         "group",
         "condition",
         "variant",
@@ -50,10 +52,10 @@ def test_table_has_one_line_per_session(study: Study, capsys) -> None:
         "status",
         "resumed",
     ]
-    by_group = {line.split()[1]: line.split() for line in lines[1:]}
-    assert by_group["G5"][6] == "stopped"
-    assert by_group["G6"][6] == "interrupted"
-    assert by_group["G4"][6:] == ["finished", "1"]
+    by_group = {line.split()[3]: line.split() for line in lines[1:]}
+    assert by_group["G5"][8] == "stopped"
+    assert by_group["G6"][8] == "interrupted"
+    assert by_group["G4"][8:] == ["finished", "1"]
 
 
 def test_state_dir_comes_from_the_configuration(study: Study, tmp_path: Path, capsys) -> None:

@@ -1,13 +1,17 @@
 """Sessions written before the records were typed still load, export, report and resume.
 
 tests/data/sessions-v1 (see its README) was recorded by the code of commit 9c84157.
-Today's code must read it exactly as that code did: the same exports byte for byte,
-the same report, the same session list, and the interrupted session resumed to the
-very same end, in every learner value and every other field but the wall-clock time.
+Today's code must read it exactly as that code did: the same exports byte for byte
+in every column that code wrote (its `session` is today's `session_name`; the
+columns added since hold the session's derived uid, an empty robot, no participant),
+the same statistics in the report, the same session list, and the interrupted
+session resumed to the very same end, in every learner value and every other field
+but the wall-clock time.
 """
 
 from __future__ import annotations
 
+import csv
 import io
 import json
 import shutil
@@ -54,7 +58,8 @@ def test_every_session_loads_whole() -> None:
     for directory in SESSIONS:
         session = load_session(directory)
         assert session.warnings == []
-        assert len(session.records) == len((directory / RECORDS_FILE).read_text().splitlines())
+        lines = (directory / RECORDS_FILE).read_text().splitlines()
+        assert session.index.records == len(lines) == len(list(session.records()))
 
 
 @pytest.mark.parametrize("directory", SESSIONS, ids=lambda d: d.name)
@@ -88,27 +93,81 @@ def test_old_snapshots_load_and_save_unchanged(snapshot: Path) -> None:
     assert json.loads(json.dumps(state_to_plain(state_from_plain(state)))) == state
 
 
+# Each old session's uid, derived from its plan.json: the same on every computer, every run.
+DERIVED_UIDS = {
+    "20261125T165026-demo": "01M89SV7BDY3QJ2WVDWG15QGY6",
+    "20261125T165027-demo": "01M89SV8EZCHPXS6BXAD6JHM2N",
+    "20261125T165027-C13": "01M89SV8TZF3XFD63AK074D9ZE",
+}
+
+
+def as_written_then(path: Path) -> tuple[str, list[dict[str, str]]]:
+    """A CSV of today projected on the columns of commit 9c84157, written as that code did;
+    and today's rows, for the columns added since."""
+    with path.open(newline="", encoding="utf-8") as stream:
+        rows = list(csv.DictReader(stream))
+    with (EXPECTED / "trials.csv").open(newline="", encoding="utf-8") as stream:
+        old_trials = next(csv.reader(stream))
+    with (EXPECTED / "events.csv").open(newline="", encoding="utf-8") as stream:
+        old_events = next(csv.reader(stream))
+    header = old_trials if "trial" in rows[0] and "detail" not in rows[0] else old_events
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    for row in rows:
+        then = {**row, "session": row["session_name"]}
+        writer.writerow([then[column] for column in header])
+    return buffer.getvalue(), rows
+
+
 @pytest.mark.parametrize("anonymise", [False, True], ids=["named", "anonymised"])
 def test_export_is_what_it_was(tmp_path: Path, anonymise: bool) -> None:
     suffix = "-anonymised" if anonymise else ""
     trials, events = tmp_path / "trials.csv", tmp_path / "events.csv"
     arguments = ["export", "--state-dir", str(STATE), "--csv", str(trials), "--events", str(events)]
     assert main([*arguments, *(["--anonymise"] if anonymise else [])]) == 0
-    assert trials.read_text() == (EXPECTED / f"trials{suffix}.csv").read_text()
-    assert events.read_text() == (EXPECTED / f"events{suffix}.csv").read_text()
+    for path, expected in ((trials, "trials"), (events, "events")):
+        then, rows = as_written_then(path)
+        assert then == (EXPECTED / f"{expected}{suffix}.csv").read_text()
+        for row in rows:
+            assert row["session"] == DERIVED_UIDS[row["session_name"]]
+            assert row["robot"] == "" and row["participant"] == ""
+    _, rows = as_written_then(trials)
+    flagged = [r for r in rows if "TRUE" in (r["perseverative"], r["win_shift"])]
+    assert flagged and all(r["error_cause"] in ("exploratory", "after_wrong_feedback") for r in flagged)
+    assert {r["error_cause"] for r in rows if r not in flagged} == {""}
 
 
 def test_report_is_what_it_was(tmp_path: Path) -> None:
     assert main(["report", "--state-dir", str(STATE), "--out", str(tmp_path)]) == 0
-    for name in ("summary.json", "summary.md"):
-        assert (tmp_path / name).read_text() == (EXPECTED / name).read_text(), name
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    then = json.loads((EXPECTED / "summary.json").read_text())
+    assert summary["session_names"] == then["sessions"]
+    assert summary["sessions"] == [DERIVED_UIDS[name] for name in then["sessions"]]
+    for now, old in zip(
+        [*summary["conditions"], summary["all"]], [*then["conditions"], then["all"]], strict=True
+    ):
+        for key, value in old.items():
+            assert now[key] == value, (old["condition"], key)
+    # The Markdown keeps every row it had, with shares now to 0.1 %.
+    text = (tmp_path / "summary.md").read_text()
+    assert "| Trials | 27 | 15 | 42 |" in text
+    assert "| Trials to learn, mean ± sd | 3.14 ± 1.35" in text
+    assert "| First guess correct | 3 of 8 (37.5 %)" in text
 
 
 def test_session_list_is_what_it_was(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["sessions", "--state-dir", str(STATE), "--json"]) == 0
     # The list names each directory as given: the expected one was made from the repository root.
-    listed = capsys.readouterr().out.replace(str(STATE), "tests/data/sessions-v1/state")
-    assert listed == (EXPECTED / "sessions.json").read_text()
+    listed = json.loads(capsys.readouterr().out.replace(str(STATE), "tests/data/sessions-v1/state"))
+    then = json.loads((EXPECTED / "sessions.json").read_text())
+    assert len(listed) == len(then)
+    for now, old in zip(listed, then, strict=True):
+        assert now["session"] == DERIVED_UIDS[old["session"]]
+        assert {**now, "session": now["session_name"]} | old == {
+            **now,
+            "session": now["session_name"],
+        }
 
 
 @pytest.mark.parametrize("from_records", [False, True], ids=["from-snapshot", "from-records"])

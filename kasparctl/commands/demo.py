@@ -33,7 +33,7 @@ from kasparctl.sim.demo import (
     run_demo,
     with_variant,
 )
-from kasparctl.sim.teacher import Teacher, TeacherError
+from kasparctl.sim.teacher import DEFAULT_THINK_S, Teacher, TeacherError, load_teacher
 
 
 def register(subparsers: Any) -> None:
@@ -56,6 +56,13 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--p-wrong-green", type=float, default=0.0)
     parser.add_argument("--p-wrong-red", type=float, default=0.0)
     parser.add_argument("--p-no-answer", type=float, default=0.0)
+    parser.add_argument(
+        "--teacher",
+        default=None,
+        metavar="FILE",
+        help="children answering as a teacher model (`kasparctl fit-teacher`): its rates "
+        "pooled, its reaction times",
+    )
     parser.add_argument(
         "--json", action="store_true", help="end with one JSON line summarising the game"
     )
@@ -85,6 +92,14 @@ def run(arguments: argparse.Namespace) -> int:
         if arguments.variant and arguments.variant != config.game.variant:
             config = with_variant(config, arguments.variant)
         teacher = Teacher(arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)
+        think_s = DEFAULT_THINK_S
+        if arguments.teacher is not None:
+            if teacher != Teacher():
+                raise TeacherError(
+                    "--teacher: the model gives the rates; drop the --p-* options", "teacher"
+                )
+            model = load_teacher(arguments.teacher)
+            teacher, think_s = model.pooled(), model.think_s()
     except (ConfigError, TeacherError, LearnerError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
@@ -98,7 +113,11 @@ def run(arguments: argparse.Namespace) -> int:
     seed = arguments.seed if arguments.seed is not None else secrets.randbelow(2**31)
     state_dir = Path(arguments.state_dir or tempfile.mkdtemp(prefix="kaspar-demo-"))
     options = DemoOptions(
-        state_dir=state_dir, seed=seed, teacher=teacher, interactive=arguments.interactive
+        state_dir=state_dir,
+        seed=seed,
+        teacher=teacher,
+        think_s=think_s,
+        interactive=arguments.interactive,
     )
     lock = StateDirLock(state_dir)
     try:

@@ -1,18 +1,35 @@
 """`kasparctl export`: trials (and other events) of recorded sessions as tidy CSV.
 
-One row per trial, undone answers included and marked, with the session,
-group and condition on every row; columns are documented in
-docs/research-data.md. --events writes every other record (researcher
-commands, presses, prompts, faults, HAL events, steps) to a second CSV.
+One row per trial, undone answers included and marked, with the session (its
+unique id and readable name), robot, group, condition and participant on
+every row; columns are documented in docs/research-data.md. --events writes
+every other record (researcher commands, presses, prompts, faults, HAL
+events, steps) to a second CSV. --state-dir may be repeated to pool robots
+or days. Outputs are private (0600), written whole or not at all, and never
+inside a state or session directory.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
-from kasparctl.research.source import SourceError, add_source_arguments, read_sessions
+from kasparctl.research.output import OutputError, check_outputs, closed_pipe
+from kasparctl.research.participants import (
+    NO_PARTICIPANTS,
+    Participants,
+    ParticipantsError,
+    load_participants,
+)
+from kasparctl.research.source import (
+    SourceError,
+    add_source_arguments,
+    input_files,
+    read_sessions,
+    report_unknown_codes,
+)
 from kasparctl.research.tidy import write_events, write_trials
 
 
@@ -25,6 +42,11 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--csv", required=True, metavar="FILE", help="the trials CSV ('-': stdout)")
     parser.add_argument("--events", metavar="FILE", help="also every non-trial record, as CSV")
     parser.add_argument(
+        "--participants",
+        metavar="FILE",
+        help="participants.csv: the children's attributes by code, joined to every row",
+    )
+    parser.add_argument(
         "--anonymise",
         action="store_true",
         help='replace children\'s first names by "child N" (N: their place in the plan)',
@@ -35,23 +57,47 @@ def register(subparsers: Any) -> None:
 def run(arguments: argparse.Namespace) -> int:
     """Write the trials (and optionally the events) of every session as CSV."""
     try:
-        _, sessions = read_sessions(arguments)
-    except SourceError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
-    try:
-        rows = write_trials(arguments.csv, sessions, arguments.anonymise)
+        participants = _participants(arguments.participants)
+        source, catalogue = read_sessions(arguments)
+        sessions = catalogue.sessions
+        outputs = [("--csv", arguments.csv)]
+        if arguments.events:
+            outputs.append(("--events", arguments.events))
+        check_outputs(
+            outputs,
+            source.state_dirs,
+            [s.directory for s in sessions] + [d.directory for d in catalogue.damaged],
+            input_files(arguments),
+        )
+        report_unknown_codes(sessions, participants)
+        rows = write_trials(arguments.csv, sessions, arguments.anonymise, participants)
         events = (
             write_events(arguments.events, sessions, arguments.anonymise)
             if arguments.events
             else None
         )
+    except BrokenPipeError:
+        return closed_pipe()
+    except (SourceError, OutputError, ParticipantsError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
     except OSError as error:
-        print(f"error: cannot write the CSV: {error}", file=sys.stderr)
+        print(f"error: cannot write the CSV: {_why(error)}", file=sys.stderr)
         return 1
     # Stdout may be the CSV itself: the tally goes with the warnings.
     message = f"{rows} trials from {len(sessions)} sessions to {arguments.csv}"
     if events is not None:
         message += f"; {events} events to {arguments.events}"
+    if catalogue.damaged:
+        message += f" ({len(catalogue.damaged)} damaged sessions left out, listed above)"
     print(message, file=sys.stderr)
     return 0
+
+
+def _participants(path: str | None) -> Participants:
+    return NO_PARTICIPANTS if path is None else load_participants(Path(path))
+
+
+def _why(error: OSError) -> str:
+    where = f"{error.filename}: " if error.filename else ""
+    return f"{where}{error.strerror or error}"

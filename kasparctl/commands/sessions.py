@@ -1,8 +1,9 @@
-"""`kasparctl sessions`: every recorded session, with its group, condition, date and status.
+"""`kasparctl sessions`: every recorded session, with its ids, group, condition, date and status.
 
-Status is "finished", "stopped" (the researcher's stop gesture) or
+Status is "finished", "stopped" (the researcher's stop gesture),
 "interrupted" (the robot never reached the end: it resumes the most recent
-such session on its next start).
+such session on its next start), or "damaged" (it cannot be read: the reason
+is given). Each session is read in one streaming pass, never held whole.
 """
 
 from __future__ import annotations
@@ -12,10 +13,22 @@ import json
 import sys
 from typing import Any
 
-from kasparctl.research.catalogue import SessionData
+from kasparctl.research.catalogue import Damaged, SessionData
+from kasparctl.research.output import closed_pipe
 from kasparctl.research.source import SourceError, add_source_arguments, read_sessions
 
-COLUMNS = ("session", "group", "condition", "variant", "date", "trials", "status", "resumed")
+COLUMNS = (
+    "session_name",
+    "session",
+    "robot",
+    "group",
+    "condition",
+    "variant",
+    "date",
+    "trials",
+    "status",
+    "resumed",
+)
 
 
 def register(subparsers: Any) -> None:
@@ -35,31 +48,49 @@ def describe(session: SessionData) -> dict[str, Any]:
         "created": session.created,
         "date": session.date,
         # Undone answers are not trials; they stay in the records and the export.
-        "trials": len(session.trials),
-        "undone": len(session.all_trials) - len(session.trials),
+        "trials": session.index.trials,
+        "undone": len(session.index.undone),
         "status": session.status,
         "resumed": session.resumed,
         "directory": str(session.directory),
     }
 
 
+def describe_damaged(damaged: Damaged) -> dict[str, Any]:
+    """A session that cannot be read, as a row: its directory and why."""
+    return {
+        "session_name": damaged.directory.name,
+        "status": "damaged",
+        "reason": damaged.reason,
+        "directory": str(damaged.directory),
+    }
+
+
 def run(arguments: argparse.Namespace) -> int:
-    """List every session of a state directory: group, condition, date, trials, status."""
+    """List every session of the state directories: ids, group, condition, date, status."""
     try:
-        source, sessions = read_sessions(arguments)
+        # Damaged sessions are part of the listing, not warnings beside it.
+        source, catalogue = read_sessions(arguments, report_damaged=False)
+        rows = [describe(session) for session in catalogue.sessions]
+        damaged = [describe_damaged(d) for d in catalogue.damaged]
+        if arguments.json:
+            print(json.dumps(rows + damaged, indent=1))
+            return 0
+        if not rows and not damaged:
+            where = ", ".join(str(d) for d in source.state_dirs)
+            print(f"no sessions in {where}")
+            return 0
+        table = [list(COLUMNS), *([str(row[column]) for column in COLUMNS] for row in rows)]
+        widths = [max(len(line[index]) for line in table) for index in range(len(COLUMNS))]
+        for line in table:
+            cells = (text.ljust(width) for text, width in zip(line, widths, strict=True))
+            print("  ".join(cells).rstrip())
+        for row in damaged:
+            print(f"damaged: {row['reason']}")
+        sys.stdout.flush()
+    except BrokenPipeError:
+        return closed_pipe()
     except SourceError as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
-    rows = [describe(session) for session in sessions]
-    if arguments.json:
-        print(json.dumps(rows, indent=1))
-        return 0
-    if not rows:
-        print(f"no sessions in {source.state_dir}")
-        return 0
-    table = [list(COLUMNS), *([str(row[column]) for column in COLUMNS] for row in rows)]
-    widths = [max(len(line[index]) for line in table) for index in range(len(COLUMNS))]
-    for line in table:
-        cells = (text.ljust(width) for text, width in zip(line, widths, strict=True))
-        print("  ".join(cells).rstrip())
     return 0

@@ -1,8 +1,11 @@
-"""`kasparctl simulate`: replicate the pilot study (or sweep the learner) with simulated children.
+"""`kasparctl simulate`: replicate the pilot study, sweep the learner, or plan a study's size.
 
 Without --config it plays the paper's pilot (3 locations, 6 toys) with the
 built-in profiles; with --config the game and profiles come from kaspar.toml.
---alpha, --beta and --gamma override the chosen profile's values.
+--alpha, --beta and --gamma override the chosen profile's values; --teacher
+gives the children of a teacher model (`kasparctl fit-teacher` fits one from
+recorded sessions). --power compares two arms (--compare NAME=A,B) and gives
+the power to detect their difference against the number of groups.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ import secrets
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -27,30 +31,45 @@ from kasparctl.config import (
     load_config,
 )
 from kasparctl.learning.learner import LearnerError, LearnerParams
-from kasparctl.learning.study_stats import StudyStats, summarise
-from kasparctl.sim.simulate import SimulationError, playable, simulate_study
+from kasparctl.learning.study_stats import StudyStats
+from kasparctl.research.output import OutputError, check_outputs, closed_pipe, write_bytes
+from kasparctl.sim.fit import PAPER
+from kasparctl.sim.power import (
+    DEFAULT_GROUPS,
+    DEFAULT_STUDIES,
+    Arm,
+    PowerError,
+    PowerPoint,
+    draw_power,
+    power_curve,
+)
+from kasparctl.sim.simulate import SimulationError, playable, summarise_study
+from kasparctl.sim.studies import GROUP_MEASURES
 from kasparctl.sim.sweep import PilotShape, sweep
-from kasparctl.sim.teacher import Teacher
+from kasparctl.sim.teacher import Teacher, TeacherError, TeacherModel, load_teacher
 
-# The pilot study's figures (section IV), shown beside a pilot simulation.
-PAPER = {
-    "problems": 48,
-    "trials_total": 202,
-    "trials_mean": 4.21,
-    "trials_sd": 1.46,
-    "trials_min": 2,
-    "trials_max": 7,
-    "first_guess_correct": 7,
-    "perseverative_errors": 1,
-    "win_shifts": 1,
-    "initial_entropy": 2.585,
-    "final_entropy_mean": 0.73,
-    "final_entropy_sd": 0.58,
-}
+__all__ = ["PAPER", "register", "run"]
+
 SWEEPABLE = ("alpha", "beta")
 # Below this many groups the scalar simulation takes about a second; no bar.
 PROGRESS_MIN_GROUPS = 2000
 MAX_SWEEP_VALUES = 1000
+# The scalar path plays about 8,000 pilot groups a second and holds only totals: a million
+# groups is two minutes, the most a question about one setting needs.
+MAX_GROUPS = 1_000_000
+SCALAR_GROUPS_PER_SECOND = 8000
+# The sweep holds about 150 bytes per problem: 20 million problems is about 3 GB.
+MAX_SWEEP_PROBLEMS = 20_000_000
+COMPARABLE = (
+    "profile",
+    "teacher",
+    "p_wrong_green",
+    "p_wrong_red",
+    "p_no_answer",
+    "alpha",
+    "beta",
+    "exclude_learned",
+)
 
 
 def register(subparsers: Any) -> None:
@@ -114,6 +133,18 @@ def register(subparsers: Any) -> None:
         "--p-no-answer", type=_probability, default=0.0, help="chance nobody answers a guess"
     )
     parser.add_argument(
+        "--teacher",
+        metavar="FILE",
+        default=None,
+        help="a teacher model (TOML; `kasparctl fit-teacher` writes one): each child's rates",
+    )
+    parser.add_argument(
+        "--exclude-learned",
+        choices=("names", "always", "never"),
+        default=None,
+        help="withdraw a learned toy from later targets (default: the config's, else names)",
+    )
+    parser.add_argument(
         "--config", default=None, help="kaspar.toml to take the game settings and profiles from"
     )
     parser.add_argument(
@@ -127,6 +158,43 @@ def register(subparsers: Any) -> None:
         metavar="NAME=START:STOP:STEP",
         help="sweep alpha or beta over an inclusive range (repeatable; vectorised pilot problems)",
     )
+    power = parser.add_argument_group("study design (--power)")
+    power.add_argument(
+        "--power",
+        action="store_true",
+        help="the power to detect the --compare difference, against the number of groups",
+    )
+    power.add_argument(
+        "--compare",
+        type=_comparison,
+        metavar="NAME=A,B",
+        help=f"the two arms: NAME one of {', '.join(COMPARABLE)} (teacher: two model files)",
+    )
+    power.add_argument(
+        "--measure",
+        choices=tuple(GROUP_MEASURES),
+        default="trials_mean",
+        help="each group's value the arms are compared on (default trials_mean)",
+    )
+    power.add_argument(
+        "--groups-per-arm",
+        type=_group_list,
+        default=DEFAULT_GROUPS,
+        metavar="N,N,...",
+        help=f"designs to try (default {','.join(map(str, DEFAULT_GROUPS))})",
+    )
+    power.add_argument(
+        "--studies",
+        type=_positive_int,
+        default=DEFAULT_STUDIES,
+        help=f"simulated studies per design (default {DEFAULT_STUDIES})",
+    )
+    power.add_argument(
+        "--level", type=_probability, default=0.05, help="the test's level (default 0.05)"
+    )
+    power.add_argument(
+        "--figure", metavar="FILE", default=None, help="also draw the power curve (.png or .svg)"
+    )
     parser.set_defaults(run=run)
 
 
@@ -135,15 +203,25 @@ class UsageError(Exception):
 
 
 def run(arguments: argparse.Namespace) -> int:
-    """Simulate or sweep, print the statistics (JSON with --json); 1 on a bad option."""
+    """Simulate, sweep or plan, print the result (JSON with --json); 1 on a bad option."""
+    try:
+        return _run(arguments)
+    except BrokenPipeError:
+        return closed_pipe()
+
+
+def _run(arguments: argparse.Namespace) -> int:
     try:
         game, profiles, default_profile, config_seed = _settings(arguments.config)
         params, profile_name = _params(arguments, profiles, default_profile)
-        teacher = Teacher(arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)
+        teacher = _teacher(arguments)
         if arguments.variant is not None:
             game = msgspec.structs.replace(game, variant=arguments.variant)
+        if arguments.exclude_learned is not None:
+            game = msgspec.structs.replace(game, exclude_learned_rule=arguments.exclude_learned)
         game = playable(game)
-    except (ConfigError, UsageError, SimulationError) as error:
+        _check_size(arguments, game)
+    except (ConfigError, UsageError, SimulationError, TeacherError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
     seed = arguments.seed if arguments.seed is not None else config_seed
@@ -151,29 +229,79 @@ def run(arguments: argparse.Namespace) -> int:
         # Drawn here and printed, so any run can be repeated; from the OS's entropy,
         # as numpy's own SeedSequence() draws it.
         seed = secrets.randbits(63)
+    simple = teacher if isinstance(teacher, Teacher) else teacher.pooled(prompts_as_silence=False)
     context = {
         "variant": game.variant,
+        "exclude_learned": game.exclude_learned_rule,
         "groups": arguments.groups,
         "seed": seed,
         "profile": profile_name,
         "alpha": params.alpha,
         "beta": params.beta,
         "gamma": params.gamma,
-        "p_wrong_green": teacher.p_wrong_green,
-        "p_wrong_red": teacher.p_wrong_red,
-        "p_no_answer": teacher.p_no_answer,
+        "p_wrong_green": simple.p_wrong_green,
+        "p_wrong_red": simple.p_wrong_red,
+        "p_no_answer": simple.p_no_answer,
     }
+    if isinstance(teacher, TeacherModel):
+        context["teacher"] = arguments.teacher
+    if arguments.power:
+        return _run_power(arguments, game, params, profiles, teacher, seed)
     if arguments.sweep:
+        if isinstance(teacher, TeacherModel):
+            print(
+                "error: --sweep: expected one teacher for every child, not a model", file=sys.stderr
+            )
+            return 1
         return _run_sweep(arguments, game, params, teacher, seed, context)
 
     with _progress(arguments.groups) as on_group:
-        records = simulate_study(arguments.groups, game, params, teacher, seed, on_group)
-    stats = summarise(records)
+        stats = summarise_study(arguments.groups, game, params, teacher, seed, on_group)
     if arguments.json:
         print(json.dumps({**context, **msgspec.to_builtins(stats)}, allow_nan=False))
     else:
         print(_stats_table(stats, context, len(game.toys), len(game.targets)))
     return 0
+
+
+def _teacher(arguments: argparse.Namespace) -> Teacher | TeacherModel:
+    """The children: a teacher model file, or the --p-* rates (not both)."""
+    rates = (arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)
+    if arguments.teacher is None:
+        return Teacher(*rates)
+    if any(rates):
+        raise UsageError(
+            "--teacher: the model gives the children's rates; drop --p-wrong-green, "
+            "--p-wrong-red and --p-no-answer"
+        )
+    return load_teacher(arguments.teacher)
+
+
+def _check_size(arguments: argparse.Namespace, game: GameSettings) -> None:
+    """Refuse work no run should take hours or gigabytes for, saying what to do instead."""
+    if arguments.power:
+        if arguments.compare is None:
+            raise UsageError("--power: expected --compare NAME=A,B (the two arms to compare)")
+        return
+    if arguments.compare is not None:
+        raise UsageError("--compare: only with --power")
+    if arguments.sweep:
+        settings = math.prod(len(values) for _, values in arguments.sweep)
+        problems = arguments.groups * (len(game.locations) or 3) * settings
+        if problems > MAX_SWEEP_PROBLEMS:
+            raise UsageError(
+                f"--groups {arguments.groups} x {settings} settings = {problems:,} pilot problems; "
+                f"expected at most {MAX_SWEEP_PROBLEMS:,} (about 3 GB): fewer groups or settings"
+            )
+        return
+    if arguments.groups > MAX_GROUPS:
+        minutes = arguments.groups / SCALAR_GROUPS_PER_SECOND / 60
+        raise UsageError(
+            f"--groups: expected at most {MAX_GROUPS:,}, found {arguments.groups:,} (about "
+            f"{minutes:,.0f} minutes of simulation); the figures of a million groups are already "
+            "exact to three decimals. For a study's size use --power; to place a cohort among "
+            "simulated studies, `kasparctl replicate`"
+        )
 
 
 def _settings(
@@ -212,6 +340,143 @@ def _params(
         " with " + ", ".join(f"{k} {v:g}" for k, v in overrides.items()) if overrides else ""
     )
     return params, label
+
+
+def _run_power(
+    arguments: argparse.Namespace,
+    game: GameSettings,
+    params: LearnerParams,
+    profiles: dict[str, ProfileSettings],
+    teacher: Teacher | TeacherModel,
+    seed: int,
+) -> int:
+    name, values = arguments.compare
+    try:
+        arms = tuple(_arm(name, value, game, params, profiles, teacher) for value in values)
+        if arguments.figure is not None:
+            check_outputs([("--figure", arguments.figure)], [], [], _inputs(arguments))
+        points = power_curve(
+            (arms[0], arms[1]),
+            arguments.measure,
+            arguments.groups_per_arm,
+            arguments.studies,
+            arguments.level,
+            seed,
+        )
+        title = (
+            f"{arms[0].label} vs {arms[1].label}: {arguments.measure} "
+            f"(Welch t-test on groups, level {arguments.level:g})"
+        )
+        if arguments.figure is not None:
+            _write_figure(Path(arguments.figure), points, title, arguments.studies)
+    except (UsageError, PowerError, ConfigError, TeacherError, LearnerError, OutputError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    except OSError as error:
+        print(f"error: cannot write {arguments.figure}: {error.strerror or error}", file=sys.stderr)
+        return 1
+    if arguments.json:
+        print(
+            json.dumps(
+                {
+                    "compare": {"name": name, "a": values[0], "b": values[1]},
+                    "measure": arguments.measure,
+                    "level": arguments.level,
+                    "studies": arguments.studies,
+                    "seed": seed,
+                    "variant": game.variant,
+                    "points": [point.plain() for point in points],
+                },
+                allow_nan=False,
+            )
+        )
+        return 0
+    print(f"power: {title}")
+    print(
+        f"{arguments.studies} simulated studies per design, seed {seed}; {game.variant}, "
+        f"{len(game.targets)} targets, {len(game.toys)} toys; measure: "
+        f"{GROUP_MEASURES[arguments.measure]}"
+    )
+    print(f"{'groups per arm':>15} {'power':>7} {'MC error':>9} {'mean difference (A - B)':>24}")
+    for point in points:
+        print(
+            f"{point.groups:>15} {point.power:>7.3f} {point.mc_error:>9.3f} "
+            f"{point.difference:>24.4f}"
+        )
+    enough = next((p.groups for p in points if p.power >= 0.8), None)
+    print(
+        f"80 % power from {enough} groups per arm"
+        if enough is not None
+        else "80 % power not reached: try more groups (--groups-per-arm)"
+    )
+    return 0
+
+
+def _inputs(arguments: argparse.Namespace) -> list[tuple[str, str]]:
+    files = [("--config", arguments.config)] if arguments.config else []
+    if arguments.teacher:
+        files.append(("--teacher", arguments.teacher))
+    name, values = arguments.compare
+    if name == "teacher":
+        files += [("--compare", value) for value in values]
+    return files
+
+
+def _write_figure(path: Path, points: list[PowerPoint], title: str, studies: int) -> None:
+    import io
+
+    try:
+        figure = draw_power(points, title, studies)
+    except ImportError:
+        raise UsageError(
+            "--figure: needs matplotlib, which is not installed: pip install 'kasparctl[report]'"
+        ) from None
+    kind = "svg" if path.suffix.lower() == ".svg" else "png"
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format=kind, dpi=120)
+    write_bytes(path, buffer.getvalue())
+
+
+def _arm(
+    name: str,
+    value: str,
+    game: GameSettings,
+    params: LearnerParams,
+    profiles: dict[str, ProfileSettings],
+    teacher: Teacher | TeacherModel,
+) -> Arm:
+    """One arm of the comparison: the base settings with NAME set to `value`."""
+    label = f"{name} {value}"
+    if name == "profile":
+        if value not in profiles:
+            known = ", ".join(sorted(profiles))
+            raise UsageError(f"--compare: profile: expected one of {known}, found {value!r}")
+        chosen = profiles[value].params()
+        return Arm(label, game, dataclasses.replace(chosen, gamma=params.gamma), teacher)
+    if name == "teacher":
+        return Arm(label, game, params, load_teacher(value))
+    if name == "exclude_learned":
+        if value not in ("names", "always", "never"):
+            raise UsageError(
+                f"--compare: exclude_learned: expected names, always or never, found {value!r}"
+            )
+        return Arm(
+            label, msgspec.structs.replace(game, exclude_learned_rule=value), params, teacher
+        )
+    number = _float(value)
+    if number is None:
+        raise UsageError(f"--compare: {name}: expected a number, found {value!r}")
+    if name in ("alpha", "beta"):
+        try:
+            return Arm(label, game, dataclasses.replace(params, **{name: number}), teacher)
+        except LearnerError as error:
+            raise UsageError(f"--compare: {name}: {error}") from None
+    if isinstance(teacher, TeacherModel):
+        raise UsageError(f"--compare: {name}: expected the --p-* rates, not a --teacher model")
+    try:
+        return Arm(label, game, params, dataclasses.replace(teacher, **{name: number}))
+    except TeacherError as error:
+        raise UsageError(f"--compare: {name}: {error}") from None
 
 
 def _run_sweep(
@@ -361,6 +626,8 @@ def _teacher_text(teacher: Teacher) -> str:
 
 
 def _teacher_text_from(context: dict[str, Any]) -> str:
+    if "teacher" in context:
+        return f"model {context['teacher']} (its children's rates, in turn)"
     return _teacher_text(
         Teacher(context["p_wrong_green"], context["p_wrong_red"], context["p_no_answer"])
     )
@@ -429,6 +696,30 @@ def _probability(text: str) -> float:
     if value is None or not 0.0 <= value <= 1.0:
         raise argparse.ArgumentTypeError(f"expected a probability in [0, 1], found {text!r}")
     return value
+
+
+def _comparison(text: str) -> tuple[str, tuple[str, str]]:
+    """NAME=A,B: the setting the two arms differ in, and its two values."""
+    name, equals, spec = text.partition("=")
+    values = [value.strip() for value in spec.split(",")]
+    if not equals or name.strip() not in COMPARABLE or len(values) != 2 or not all(values):
+        raise argparse.ArgumentTypeError(
+            f"expected NAME=A,B with NAME one of {', '.join(COMPARABLE)}, found {text!r}"
+        )
+    return name.strip(), (values[0], values[1])
+
+
+def _group_list(text: str) -> tuple[int, ...]:
+    """N,N,...: numbers of groups per arm, each >= 2."""
+    try:
+        values = tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected numbers of groups separated by commas, found {text!r}"
+        ) from None
+    if not values or min(values) < 2:
+        raise argparse.ArgumentTypeError(f"expected numbers >= 2, found {text!r}")
+    return values
 
 
 def _sweep_range(text: str) -> tuple[str, list[float]]:

@@ -29,6 +29,7 @@ import contextlib
 import datetime as dt
 import os
 import re
+import secrets
 import shutil
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -38,6 +39,7 @@ from typing import Any, TypeVar
 import msgspec
 import structlog
 
+from kasparctl.config import default_robot_id
 from kasparctl.game.records import AnyRecord, Record
 from kasparctl.game.state import GameState, StateError
 from kasparctl.learning.learner import PLAIN_DATA_ERRORS, LearnerState
@@ -324,11 +326,22 @@ class Session:
 
     @classmethod
     def create(
-        cls, state_dir: Path, plan: dict[str, Any], now: dt.datetime | None = None
+        cls,
+        state_dir: Path,
+        plan: dict[str, Any],
+        now: dt.datetime | None = None,
+        robot: str | None = None,
     ) -> Session:
-        """A new session directory for `plan` (a dict with at least `group`)."""
+        """A new session directory for `plan` (a dict with at least `group`).
+
+        The directory's name (its start time and group) is readable but not unique
+        across robots or state directories; plan.json also holds `uid`, a ULID no
+        other session anywhere has, and `robot`, the robot's id (`robot`, else the
+        plan's, else kasparctl.config.default_robot_id()).
+        """
         sessions = _sessions_dir(state_dir)
-        stamp = (now or dt.datetime.now(dt.UTC)).strftime("%Y%m%dT%H%M%S")
+        now = now or dt.datetime.now(dt.UTC)
+        stamp = now.strftime("%Y%m%dT%H%M%S")
         base = f"{stamp}-{_safe_name(plan['group'])}"
         session_id, suffix = base, 1
         while (sessions / session_id).exists():
@@ -340,7 +353,13 @@ class Session:
         except OSError as error:
             raise _storage_failed(directory, "cannot create the session", error) from error
         try:
-            full_plan = {"session": session_id, "created": _utc_now(), **plan}
+            full_plan = {
+                "session": session_id,
+                "uid": new_ulid(now),
+                "robot": robot or plan.get("robot") or default_robot_id(),
+                "created": _utc_now(),
+                **plan,
+            }
             write_atomic(directory / PLAN_FILE, _encoder.encode(full_plan))
         except OSError as error:
             # No half-made session left behind: a directory without its plan is no session.
@@ -484,6 +503,20 @@ class EventLog:
         if self._log is not None:
             self._log.close()
             self._log = None
+
+
+_CROCKFORD = "0123456789ABCDEFGHJKMNPQRSTVWXYZ"
+
+
+def new_ulid(now: dt.datetime) -> str:
+    """A ULID: 48 bits of milliseconds since 1970, then 80 random bits, in 26 characters.
+
+    Sorts by time like the readable id, and two sessions never share one (even started
+    in the same millisecond on two robots: 2^80 random values).
+    """
+    milliseconds = int(now.timestamp() * 1000) & ((1 << 48) - 1)
+    value = (milliseconds << 80) | int.from_bytes(secrets.token_bytes(10), "big")
+    return "".join(_CROCKFORD[(value >> shift) & 31] for shift in range(125, -1, -5))
 
 
 def _seq(plain: dict[str, Any]) -> int:

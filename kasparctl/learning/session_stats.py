@@ -12,7 +12,7 @@ layer needs nothing of the game.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -65,8 +65,81 @@ class RecordedTrial(Protocol):
         ...
 
 
+class ProblemBuilder:
+    """Problems built from a session's trials one at a time, holding only what they need.
+
+    Each trial is kept as the four values the statistics read (choice, answer,
+    entropy, correctness), never as the record, so a session of any length costs
+    a few dozen bytes per trial.
+    """
+
+    def __init__(
+        self,
+        toys: Sequence[str],
+        answer_key: Sequence[str],
+        params: LearnerParams,
+        group: int = 0,
+    ) -> None:
+        """Problems of one session, whose toys and answer key are these."""
+        self.toys = list(toys)
+        self.answer_key = list(answer_key)
+        self.params = params
+        self.group = group
+        self._trials: dict[int, list[TrialRecord]] = {}
+        # Of each target's last trial, only what the problem's end needs: was it learned
+        # (and with which label), the labels offered and the Q row after it.
+        self._last: dict[int, tuple[int | None, tuple[str, ...], tuple[float, ...]]] = {}
+        self._candidates: dict[int, int] = {}
+
+    def add(self, trial: RecordedTrial) -> None:
+        """One trial that counts (undone ones are left out by the caller), in recorded order."""
+        target = trial.target_index
+        self._trials.setdefault(target, []).append(
+            TrialRecord(
+                choice=trial.choice_index,
+                feedback=trial.green,
+                entropy=trial.entropy,
+                correct=trial.correct,
+            )
+        )
+        self._candidates.setdefault(target, len(trial.candidates))
+        self._last[target] = (
+            trial.choice_index if trial.learned else None,
+            tuple(trial.candidates),
+            tuple(trial.q_after),
+        )
+
+    def problems(self) -> list[ProblemRecord]:
+        """One ProblemRecord per target the session guessed at, in the order it did."""
+        toys = self.toys
+        problems = []
+        for target, trials in self._trials.items():
+            learned, offered, last_q = self._last[target]
+            candidates = np.array([toy in offered for toy in toys])
+            if not candidates.any():
+                # A record naming none of the session's toys: over all of them.
+                candidates = np.ones(len(toys), dtype=bool)
+            q_after = np.array(last_q, dtype=np.float64)
+            answer = (
+                toys.index(self.answer_key[target]) if 0 <= target < len(self.answer_key) else None
+            )
+            problems.append(
+                ProblemRecord(
+                    group=self.group,
+                    target=target,
+                    answer=answer,
+                    trials=tuple(trials),
+                    learned=learned,
+                    final_q=tuple(float(q) for q in q_after),
+                    entropy_after=entropy_bits(softmax(q_after, self.params.beta, candidates)),
+                    candidates=self._candidates[target],
+                )
+            )
+        return problems
+
+
 def problems_from_trials(
-    trials: Sequence[RecordedTrial],
+    trials: Iterable[RecordedTrial],
     toys: Sequence[str],
     answer_key: Sequence[str],
     params: LearnerParams,
@@ -76,33 +149,7 @@ def problems_from_trials(
 
     `trials` are the trials that count (undone ones left out), in recorded order.
     """
-    by_target: dict[int, list[RecordedTrial]] = {}
+    builder = ProblemBuilder(toys, answer_key, params, group)
     for trial in trials:
-        by_target.setdefault(trial.target_index, []).append(trial)
-    problems = []
-    for target, of_target in by_target.items():
-        last = of_target[-1]
-        learned = last.choice_index if last.learned else None
-        candidates = np.array([toy in last.candidates for toy in toys])
-        q_after = np.array(last.q_after, dtype=np.float64)
-        answer = toys.index(answer_key[target]) if answer_key else None
-        problems.append(
-            ProblemRecord(
-                group=group,
-                target=target,
-                answer=answer,
-                trials=tuple(
-                    TrialRecord(
-                        choice=t.choice_index,
-                        feedback=t.green,
-                        entropy=t.entropy,
-                        correct=t.correct,
-                    )
-                    for t in of_target
-                ),
-                learned=learned,
-                final_q=tuple(float(q) for q in q_after),
-                entropy_after=entropy_bits(softmax(q_after, params.beta, candidates)),
-            )
-        )
-    return problems
+        builder.add(trial)
+    return builder.problems()

@@ -1,17 +1,24 @@
-"""Sessions read back from disk: plan, records, and what they add up to.
+"""Sessions found on disk: each one's plan, and what one streaming pass over its records says.
 
 The records are the truth (see kasparctl.game.session): a session's status and
 trial count come from them, not from the state snapshot, which a crash can
-leave one record behind.
+leave one record behind. Reading is two passes, neither holding the records:
+`index_session` streams them once for what every command needs (status,
+trials, undone answers, the toys, warnings), and `SessionData.records()`
+streams them again for whoever wants each record (export, report).
+
+A session that cannot be read at all (no plan, an empty or malformed plan,
+a records file the user may not read) is `Damaged`, with one line saying why;
+the commands list it and go on with every other session.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import hashlib
+import re
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
 from pathlib import Path
-from typing import Any
 
 import msgspec
 
@@ -23,65 +30,140 @@ from kasparctl.game.records import (
     TrialRecord,
     UndoRecord,
 )
-from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, read_records, session_dirs
+from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
+from kasparctl.research.reader import Warnings, iter_records
+from kasparctl.vocabulary import CHILD_WORDS
+
+# plan.json is a few hundred bytes; one far larger is not a plan, and is not read whole.
+MAX_PLAN_BYTES = 1 << 20
+_CROCKFORD = "0123456789ABCDEFGHJKMNPQRSTVWXYZ"
+ULID = re.compile(r"[0-9A-HJKMNP-TV-Z]{26}")
 
 
 class CatalogueError(Exception):
-    """A session that cannot be found or read, with its path."""
+    """A state directory or a named session that cannot be found or listed, with its path."""
+
+
+class PlanEntry(msgspec.Struct, kw_only=True, frozen=True):
+    """The session's plan as the robot used it (a SessionPlan, read leniently)."""
+
+    group: str = ""
+    profile: str = "paper"
+    speak_uncertainty: bool = True
+    children: tuple[str, ...] = ()
+    participants: tuple[str, ...] = ()
+    group_size: int | None = None
+    answer_key: tuple[str, ...] = ()
+
+
+class PlanFile(msgspec.Struct, kw_only=True, frozen=True):
+    """plan.json: the session's names, when it started, its condition and its plan."""
+
+    session: str | None = None
+    # Written since sessions have ULIDs; older sessions get one derived from plan.json.
+    uid: str | None = None
+    robot: str | None = None
+    created: str = ""
+    group: str | None = None
+    condition: str | None = None
+    variant: str = ""
+    seed: int | None = None
+    plan: PlanEntry | None = None
+
+
+@dataclass(frozen=True)
+class Damaged:
+    """A session directory that cannot be read, and why (one line)."""
+
+    directory: Path
+    reason: str
+
+
+@dataclass
+class SessionIndex:
+    """What one pass over a session's records found: enough to list, export and report it."""
+
+    records: int = 0
+    trial_records: int = 0
+    undone: set[int] = field(default_factory=set)
+    last_step: str | None = None
+    resumed: int = 0
+    toys: tuple[str, ...] = ()
+    # The most children seen in a turn (child_index + 1), for plans that do not say.
+    children_seen: int = 0
+    # Trials whose per-toy lists are not as long as the session's toys (damage).
+    other_width: int = 0
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def trials(self) -> int:
+        """The trials that count: an answer taken back with undo is not one."""
+        return self.trial_records - len(self.undone)
 
 
 @dataclass(frozen=True)
 class SessionData:
-    """One recorded session: its plan.json, its typed records, and what could not be read."""
+    """One readable session: its directory, plan and index; its records streamed on demand."""
 
     directory: Path
-    # plan.json as the robot wrote it: session, created, group, condition, variant, seed, plan.
-    meta: dict[str, Any]
-    records: list[AnyRecord]
-    # Lines of records.jsonl that were not whole records, one message each.
-    warnings: list[str] = field(default_factory=list)
+    meta: PlanFile
+    index: SessionIndex
+    # Unique across robots and state directories: plan.json's uid, or one derived from it.
+    uid: str
+
+    @property
+    def name(self) -> str:
+        """The readable id: its start time (UTC) and group code, its directory's name."""
+        return self.meta.session or self.directory.name
 
     @property
     def id(self) -> str:
-        """The session's id (its directory's name)."""
-        return str(self.meta.get("session", self.directory.name))
+        """The session's id in every table: its uid."""
+        return self.uid
 
     @property
-    def plan(self) -> dict[str, Any]:
+    def robot(self) -> str:
+        """The robot that recorded it; empty for sessions older than robot ids."""
+        return self.meta.robot or ""
+
+    @property
+    def plan(self) -> PlanEntry:
         """The session's plan entry as the robot used it."""
-        return dict(self.meta.get("plan") or {})
+        return self.meta.plan or PlanEntry()
 
     @property
     def group(self) -> str:
         """The group's code."""
-        return str(self.meta.get("group", self.plan.get("group", "")))
+        return self.meta.group if self.meta.group is not None else self.plan.group
 
     @property
     def profile(self) -> str:
         """The learner profile's name."""
-        return str(self.plan.get("profile", "paper"))
+        return self.plan.profile
 
     @property
     def speak_uncertainty(self) -> bool:
         """Whether Kaspar said how sure it was."""
-        return bool(self.plan.get("speak_uncertainty", True))
+        return self.plan.speak_uncertainty
 
     @property
     def condition(self) -> str:
         """profile/spoken or profile/silent."""
         spoken = "spoken" if self.speak_uncertainty else "silent"
-        return str(self.meta.get("condition") or f"{self.profile}/{spoken}")
+        return self.meta.condition or f"{self.profile}/{spoken}"
 
     @property
     def variant(self) -> str:
         """The game variant: "names" or "pilot"."""
-        return str(self.meta.get("variant", ""))
+        return self.meta.variant
 
     @property
-    def identity(self) -> dict[str, Any]:
+    def identity(self) -> dict[str, object]:
         """The columns that name a session and its condition, first in every table of it."""
         return {
-            "session": self.id,
+            "session": self.uid,
+            "session_name": self.name,
+            "robot": self.robot,
             "group": self.group,
             "condition": self.condition,
             "profile": self.profile,
@@ -92,7 +174,7 @@ class SessionData:
     @property
     def created(self) -> str:
         """When the session was opened, UTC ISO 8601."""
-        return str(self.meta.get("created", ""))
+        return self.meta.created
 
     @property
     def date(self) -> str:
@@ -102,103 +184,334 @@ class SessionData:
     @property
     def children(self) -> tuple[str, ...]:
         """The first names in the plan, if any."""
-        return tuple(self.plan.get("children") or ())
+        return self.plan.children
+
+    @property
+    def participants(self) -> tuple[str, ...]:
+        """The children's pseudonymous codes in turn order, if the plan has them."""
+        return self.plan.participants
+
+    @property
+    def group_size(self) -> int:
+        """How many children took turns: the plan's names or codes or size, else as seen."""
+        plan = self.plan
+        return (
+            len(plan.children)
+            or len(plan.participants)
+            or plan.group_size
+            or self.index.children_seen
+            or 1
+        )
+
+    def participant(self, child_index: int) -> str | None:
+        """The code of the child at this place in the turn order, if the plan has codes."""
+        codes = self.participants
+        return codes[child_index] if 0 <= child_index < len(codes) else None
+
+    def child_label(self, child_index: int) -> str:
+        """How Kaspar named the child: a first name from the plan, else "child one"..."""
+        if 0 <= child_index < len(self.children):
+            return self.children[child_index]
+        if 0 <= child_index < len(CHILD_WORDS):
+            return CHILD_WORDS[child_index]
+        return f"child {child_index + 1}"
 
     @property
     def answer_key(self) -> tuple[str, ...]:
-        """The right toy of each target, if the plan has a key."""
-        return tuple(self.plan.get("answer_key") or ())
+        """The right toy of each target, if the plan has a usable key (toys it offered)."""
+        key = self.plan.answer_key
+        return key if set(key) <= set(self.toys) else ()
 
-    @cached_property
+    @property
+    def toys(self) -> tuple[str, ...]:
+        """The game's toys in the order of the per-toy lists (probabilities, Q rows)."""
+        return self.index.toys
+
+    @property
     def undone(self) -> frozenset[int]:
         """The numbers of the trials whose answers the researcher took back."""
-        return frozenset(r.trial for r in self.records if isinstance(r, UndoRecord))
+        return frozenset(self.index.undone)
 
-    @cached_property
-    def all_trials(self) -> list[TrialRecord]:
-        """Every trial record, undone ones included, in the order they were recorded."""
-        return [r for r in self.records if isinstance(r, TrialRecord)]
-
-    @cached_property
-    def trials(self) -> list[TrialRecord]:
-        """The trials that count: an answer taken back with undo is not one."""
-        return [r for r in self.all_trials if r.trial not in self.undone]
+    @property
+    def warnings(self) -> list[str]:
+        """Lines of records.jsonl that were not whole records, one message each."""
+        return self.index.warnings
 
     @property
     def status(self) -> str:
         """ "finished", "stopped" (the researcher's stop) or "interrupted" (never ended)."""
-        last_step = None
-        for record in self.records:
-            if isinstance(record, StepRecord):
-                last_step = record.to
-        return last_step if last_step in ("finished", "stopped") else "interrupted"
+        step = self.index.last_step
+        return step if step in ("finished", "stopped") else "interrupted"
 
     @property
     def resumed(self) -> int:
         """How many times the robot carried this session on after a crash or restart."""
-        return sum(
-            1
-            for r in self.records
-            if isinstance(r, SessionRecord) and r.event is SessionEvent.RESUMED
-        )
-
-    @cached_property
-    def toys(self) -> tuple[str, ...]:
-        """The game's toys in the order of the per-toy lists (probabilities, Q rows).
-
-        plan.json does not hold them; a guess over every toy lists them all as
-        candidates, in that order, and the first guess of a problem is such a
-        guess in both variants. Failing that, positions are named from the choices.
-        """
-        width = 0
-        for trial in self.all_trials:
-            width = max(width, len(trial.probabilities))
-            if trial.candidates and len(trial.candidates) == len(trial.probabilities):
-                return tuple(trial.candidates)
-        names = [f"toy {index + 1}" for index in range(width)]
-        for trial in self.all_trials:
-            if 0 <= trial.choice_index < width:
-                names[trial.choice_index] = trial.choice
-        return tuple(names)
+        return self.index.resumed
 
     def first_names(self) -> dict[str, str]:
         """Each first name in the plan and the pseudonym that replaces it ("child 2")."""
         return {name: f"child {index + 1}" for index, name in enumerate(self.children) if name}
 
+    def records(self) -> Iterator[AnyRecord]:
+        """Every record, streamed from disk (lines that are none were reported by the index)."""
+        return iter_records(self.directory / RECORDS_FILE, lambda _warning: None)
+
+    def all_trials(self) -> Iterator[TrialRecord]:
+        """Every trial record, undone ones included, in the order they were recorded."""
+        return (r for r in self.records() if isinstance(r, TrialRecord))
+
+    def trials(self) -> Iterator[TrialRecord]:
+        """The trials that count: an answer taken back with undo is not one."""
+        undone = self.index.undone
+        return (t for t in self.all_trials() if t.trial not in undone)
+
+
+def read_plan(directory: Path) -> PlanFile:
+    """plan.json of a session directory; CatalogueError (one line, the file and why) if unusable."""
+    path = directory / PLAN_FILE
+    try:
+        with path.open("rb") as stream:
+            data = stream.read(MAX_PLAN_BYTES + 1)
+    except FileNotFoundError:
+        raise CatalogueError(f"{path}: no plan (not a session, or one never started)") from None
+    except PermissionError:
+        raise CatalogueError(f"{path}: permission denied") from None
+    except OSError as error:
+        raise CatalogueError(f"{path}: cannot read it: {error.strerror or error}") from None
+    if len(data) > MAX_PLAN_BYTES:
+        raise CatalogueError(f"{path}: larger than {MAX_PLAN_BYTES} bytes, not a plan")
+    if not data.strip():
+        raise CatalogueError(f"{path}: empty (expected the session's plan as a JSON object)")
+    try:
+        return msgspec.json.decode(data, type=PlanFile)
+    except msgspec.ValidationError as error:
+        raise CatalogueError(f"{path}: {_validation_message(str(error))}") from None
+    except msgspec.DecodeError as error:
+        raise CatalogueError(f"{path}: not JSON ({error})") from None
+    except UnicodeDecodeError:
+        raise CatalogueError(f"{path}: not UTF-8 text") from None
+    except RecursionError:
+        raise CatalogueError(f"{path}: nested too deeply to be a plan") from None
+
+
+def _validation_message(text: str) -> str:
+    """msgspec's "Expected `int`, got `str` - at `$.seed`" as "$.seed: expected int, found str"."""
+    message, _, where = text.rpartition(" - at ")
+    if not message:
+        message, where = text, ""
+    got = re.fullmatch(r"Expected `(.+)`, got `(.+)`", message)
+    if got:
+        message = f"expected {got.group(1)}, found {got.group(2)}"
+    where = where.strip("`")
+    return f"{where}: {message}" if where else message
+
+
+def derived_uid(plan_bytes: bytes, created: str) -> str:
+    """A stable ULID-shaped id for a session older than uids: its time, then a hash of its plan.
+
+    plan.json is written once, so the same session gets the same id on every
+    computer and every run.
+    """
+    import datetime as dt
+
+    try:
+        when = dt.datetime.fromisoformat(created)
+        milliseconds = int(when.timestamp() * 1000) & ((1 << 48) - 1)
+    except (ValueError, OverflowError, OSError):
+        milliseconds = 0
+    digest = int.from_bytes(hashlib.sha256(b"kaspar session\0" + plan_bytes).digest()[:10], "big")
+    value = (milliseconds << 80) | digest
+    return "".join(_CROCKFORD[(value >> shift) & 31] for shift in range(125, -1, -5))
+
+
+def session_uid(directory: Path, meta: PlanFile) -> str:
+    """The session's uid: plan.json's, or one derived from plan.json's bytes."""
+    if meta.uid is not None and ULID.fullmatch(meta.uid):
+        return meta.uid
+    try:
+        plan_bytes = (directory / PLAN_FILE).read_bytes()[:MAX_PLAN_BYTES]
+    except OSError:
+        plan_bytes = str(directory).encode()
+    return derived_uid(plan_bytes, meta.created)
+
+
+def index_session(directory: Path) -> SessionIndex:
+    """One streaming pass over a session's records: status, trials, undos, toys, warnings.
+
+    OSError (permission, a disk error) propagates for the caller to name.
+    """
+    path = directory / RECORDS_FILE
+    warnings = Warnings(path)
+    index = SessionIndex()
+    width = 0
+    toys: tuple[str, ...] = ()
+    chosen: dict[int, str] = {}
+    widths: dict[int, int] = {}  # per-toy list length -> trials
+    for record in iter_records(path, warnings.add):
+        index.records += 1
+        if isinstance(record, TrialRecord):
+            width_here = len(record.probabilities)
+            widths[width_here] = widths.get(width_here, 0) + 1
+            index.trial_records += 1
+            index.children_seen = max(index.children_seen, record.child_index + 1)
+            width = max(width, len(record.probabilities))
+            # A guess over every toy lists them all, in the per-toy lists' order; the
+            # first guess of a problem is such a guess in both variants.
+            if (
+                not toys
+                and record.candidates
+                and len(record.candidates) == len(record.probabilities)
+            ):
+                toys = tuple(record.candidates)
+            if not toys and 0 <= record.choice_index < 64:
+                chosen.setdefault(record.choice_index, record.choice)
+        elif isinstance(record, UndoRecord):
+            index.undone.add(record.trial)
+        elif isinstance(record, StepRecord):
+            index.last_step = record.to
+        elif isinstance(record, SessionRecord) and record.event is SessionEvent.RESUMED:
+            index.resumed += 1
+    if not toys:
+        # Failing a full guess, positions are named from the choices.
+        toys = tuple(chosen.get(i, f"toy {i + 1}") for i in range(width))
+    index.toys = toys
+    index.other_width = sum(n for w, n in widths.items() if w != len(toys))
+    if index.other_width:
+        warnings.add(
+            f"{path}: {index.other_width} trials have per-toy lists of another length than "
+            f"the session's {len(toys)} toys; the report leaves them out"
+        )
+    index.warnings = warnings.lines()
+    return index
+
+
+def open_session(directory: Path) -> SessionData | Damaged:
+    """A session directory read (plan, then one pass over its records), or why it cannot be."""
+    try:
+        meta = read_plan(directory)
+    except CatalogueError as error:
+        return Damaged(directory, str(error))
+    try:
+        index = index_session(directory)
+    except PermissionError:
+        return Damaged(directory, f"{directory / RECORDS_FILE}: permission denied")
+    except OSError as error:
+        return Damaged(
+            directory, f"{directory / RECORDS_FILE}: cannot read it: {error.strerror or error}"
+        )
+    return SessionData(directory, meta, index, session_uid(directory, meta))
+
 
 def load_session(directory: Path) -> SessionData:
-    """A session directory read back; a line that is no record is a warning, not an error."""
+    """A session directory read back; CatalogueError if it is damaged beyond reading."""
+    opened = open_session(directory)
+    if isinstance(opened, Damaged):
+        raise CatalogueError(opened.reason)
+    return opened
+
+
+def session_dirs(state_dir: Path) -> list[Path]:
+    """Every session directory of a state directory, by name (their start time).
+
+    A directory without a plan.json is listed too (it is a damaged session, and
+    says why); CatalogueError when the state directory cannot be listed.
+    """
+    sessions = state_dir / "sessions"
     try:
-        meta = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
-    except (OSError, msgspec.DecodeError) as error:
-        raise CatalogueError(f"{directory / PLAN_FILE}: cannot read the plan: {error}") from error
-    if not isinstance(meta, dict):
-        raise CatalogueError(f"{directory / PLAN_FILE}: expected a JSON object")
-    read = read_records(directory / RECORDS_FILE)
-    return SessionData(directory, meta, read.records, list(read.warnings))
+        if not sessions.is_dir():
+            return []
+        return sorted(p for p in sessions.iterdir() if p.is_dir() and not p.name.startswith("."))
+    except PermissionError:
+        raise CatalogueError(
+            f"{sessions}: permission denied (the state directory is private to the robot's "
+            "service user: run as that user, or with sudo)"
+        ) from None
+    except OSError as error:
+        raise CatalogueError(f"{sessions}: cannot list it: {error.strerror or error}") from None
 
 
-def find_sessions(state_dir: Path | None, names: Sequence[str]) -> list[Path]:
-    """Session directories: every one in `state_dir`, or the named ones.
+def find_sessions(state_dirs: Sequence[Path], names: Sequence[str]) -> list[Path]:
+    """Session directories: every one in the state directories, or the named ones.
 
-    A name is a session id (a directory name under <state_dir>/sessions) or the
-    path of a session directory, so sessions copied off the robot need no state dir.
+    A name is a session directory's path, its readable id (a directory name under
+    <state_dir>/sessions) or its uid; a readable id found in several state
+    directories is ambiguous, and the error says to give the uid or the path.
     """
     if not names:
-        if state_dir is None:
+        if not state_dirs:
             raise CatalogueError("no state directory to list sessions from")
-        return list(session_dirs(state_dir))
-    found = []
+        return [directory for state_dir in state_dirs for directory in session_dirs(state_dir)]
+    found: list[Path] = []
+    uids: dict[str, list[Path]] | None = None
     for name in names:
         path = Path(name)
         if (path / PLAN_FILE).is_file():
             found.append(path)
-        elif state_dir is not None and (state_dir / "sessions" / name / PLAN_FILE).is_file():
-            found.append(state_dir / "sessions" / name)
-        else:
-            where = f" in {state_dir / 'sessions'}" if state_dir is not None else ""
+            continue
+        matches = [
+            state_dir / "sessions" / name
+            for state_dir in state_dirs
+            if "/" not in name and (state_dir / "sessions" / name / PLAN_FILE).is_file()
+        ]
+        if not matches and ULID.fullmatch(name):
+            if uids is None:
+                uids = _uids(state_dirs)
+            matches = uids.get(name, [])
+        if len(matches) > 1:
             raise CatalogueError(
-                f"no session {name!r}{where} (`kasparctl sessions` lists them; "
-                "a session directory's path works too)"
+                f"session {name!r} is in {len(matches)} state directories "
+                f"({', '.join(str(m) for m in matches)}): give its uid or its directory"
             )
+        if not matches:
+            where = ", ".join(str(d / "sessions") for d in state_dirs)
+            raise CatalogueError(
+                f"no session {name!r}{f' in {where}' if where else ''} (`kasparctl sessions` "
+                "lists them; a session directory's path works too)"
+            )
+        found.extend(matches)
     return found
+
+
+def _uids(state_dirs: Sequence[Path]) -> dict[str, list[Path]]:
+    """Every readable session's uid, and where it is."""
+    by_uid: dict[str, list[Path]] = {}
+    for state_dir in state_dirs:
+        for directory in session_dirs(state_dir):
+            try:
+                meta = read_plan(directory)
+            except CatalogueError:
+                continue
+            by_uid.setdefault(session_uid(directory, meta), []).append(directory)
+    return by_uid
+
+
+@dataclass
+class Catalogue:
+    """The sessions a command works on, oldest first, and those it could not read."""
+
+    sessions: list[SessionData] = field(default_factory=list)
+    damaged: list[Damaged] = field(default_factory=list)
+    # The same session found twice (copied into two state directories): counted once.
+    duplicates: list[str] = field(default_factory=list)
+
+
+def open_sessions(directories: Iterable[Path]) -> Catalogue:
+    """Each directory opened; duplicates (one uid twice) kept once, sessions oldest first."""
+    catalogue = Catalogue()
+    seen: dict[str, Path] = {}
+    for directory in directories:
+        opened = open_session(directory)
+        if isinstance(opened, Damaged):
+            catalogue.damaged.append(opened)
+            continue
+        if opened.uid in seen:
+            catalogue.duplicates.append(
+                f"{directory}: the same session as {seen[opened.uid]} (uid {opened.uid}); "
+                "counted once"
+            )
+            continue
+        seen[opened.uid] = directory
+        catalogue.sessions.append(opened)
+    # Readable ids start with their UTC start time: by it, then by group, then by uid.
+    catalogue.sessions.sort(key=lambda s: (s.name, s.created, s.uid))
+    return catalogue

@@ -1,8 +1,14 @@
-"""Sessions grouped by condition, as the problems the paper's statistics work on.
+"""Sessions grouped by condition, as the problems, clusters and children the report works on.
 
 A condition is the plan's (learner profile / uncertainty spoken or silent).
 The pilot and the names game are different games, so when the sessions mix
 variants the variant is part of the condition too.
+
+Everything is collected in one streaming pass over each session's records
+(kasparctl.research.walk): per problem the four values per trial the paper's
+statistics need, per cluster (the unit a confidence interval resamples: a
+group of children, or a session) the counts of checked answers, and per
+child the teaching measures of kasparctl.research.children.
 """
 
 from __future__ import annotations
@@ -11,19 +17,36 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
-from kasparctl.game.records import TrialRecord
+from kasparctl.game.records import PressRecord, PromptRecord, TrialRecord, UndoRecord
 from kasparctl.learning.learner import LearnerParams
-from kasparctl.learning.session_stats import problems_from_trials
+from kasparctl.learning.session_stats import ProblemBuilder
 from kasparctl.learning.study_stats import ProblemRecord, StudyStats, summarise
 from kasparctl.research.catalogue import SessionData
+from kasparctl.research.children import Children, Feedback
+from kasparctl.research.progress import progress
+from kasparctl.research.walk import walk
+
+# What a cluster is: the group of children (the paper's unit: groups came back for
+# more sessions), or the session.
+CLUSTER_UNITS = ("group", "session")
+
+
+@dataclass(frozen=True, slots=True)
+class Factors:
+    """What makes a condition: the learner profile, whether Kaspar spoke, the game."""
+
+    profile: str
+    spoken: bool
+    variant: str
 
 
 @dataclass(frozen=True, slots=True)
 class Problem:
-    """One problem with the toy names its indices refer to (sessions may differ)."""
+    """One problem, the toy names its indices refer to (sessions may differ), and its cluster."""
 
     toys: tuple[str, ...]
     record: ProblemRecord
+    cluster: str = ""
 
     @property
     def answer(self) -> str | None:
@@ -33,11 +56,16 @@ class Problem:
 
 @dataclass
 class Condition:
-    """The sessions of one condition and their problems."""
+    """The sessions of one condition, their problems, and answers checked per cluster."""
 
     label: str
+    factors: Factors | None = None
     sessions: list[SessionData] = field(default_factory=list)
     problems: list[Problem] = field(default_factory=list)
+    feedback_by_cluster: dict[str, Feedback] = field(default_factory=dict)
+    # By place in the turn order (child 1, 2...), over every session: the plan's own view.
+    feedback_by_position: dict[int, Feedback] = field(default_factory=dict)
+    undone: int = 0
 
     @cached_property
     def stats(self) -> StudyStats:
@@ -46,14 +74,17 @@ class Condition:
         return summarise([problem.record for problem in self.problems])
 
     @property
-    def trials(self) -> list[TrialRecord]:
-        """Trials that count (not undone), over every session."""
-        return [trial for session in self.sessions for trial in session.trials]
+    def feedback(self) -> Feedback:
+        """Every answer of the condition checked against the answer key."""
+        total = Feedback()
+        for counts in self.feedback_by_cluster.values():
+            total.merge(counts)
+        return total
 
     @property
-    def undone(self) -> int:
-        """How many answers were taken back, over every session."""
-        return sum(len(s.all_trials) - len(s.trials) for s in self.sessions)
+    def clusters(self) -> list[str]:
+        """The clusters with problems, in the order first seen."""
+        return list(dict.fromkeys(p.cluster for p in self.problems))
 
 
 def condition_labels(sessions: Sequence[SessionData]) -> list[str]:
@@ -65,24 +96,68 @@ def condition_labels(sessions: Sequence[SessionData]) -> list[str]:
     ]
 
 
+def cluster_of(session: SessionData, unit: str) -> str:
+    """The key of the cluster a session's problems belong to."""
+    return session.uid if unit == "session" else f"group {session.group}"
+
+
 def by_condition(
-    sessions: Sequence[SessionData], params: Callable[[str], LearnerParams]
+    sessions: Sequence[SessionData],
+    params: Callable[[str], LearnerParams],
+    children: Children | None = None,
+    cluster_unit: str = "group",
 ) -> list[Condition]:
-    """One Condition per label, sorted by label; `params` maps a profile name to its values."""
+    """One Condition per label, sorted by label; `params` maps a profile name to its values.
+
+    `children`, if given, gets every child's teaching measures from the same pass.
+    """
     conditions: dict[str, Condition] = {}
-    for index, (session, label) in enumerate(
-        zip(sessions, condition_labels(sessions), strict=True)
-    ):
-        condition = conditions.setdefault(label, Condition(label))
-        condition.sessions.append(session)
-        toys = session.toys
-        # An answer key naming a toy the session never offered cannot be used.
-        answer_key = session.answer_key if set(session.answer_key) <= set(toys) else ()
-        records = problems_from_trials(
-            session.trials, toys, answer_key, params(session.profile), group=index
+    labelled = list(zip(sessions, condition_labels(sessions), strict=True))
+    for index, (session, label) in enumerate(progress(labelled, "reading records", "session")):
+        condition = conditions.setdefault(
+            label,
+            Condition(label, Factors(session.profile, session.speak_uncertainty, session.variant)),
         )
-        condition.problems.extend(Problem(toys, record) for record in records)
+        condition.sessions.append(session)
+        _collect(session, index, condition, params, children, cluster_of(session, cluster_unit))
     return [conditions[label] for label in sorted(conditions)]
+
+
+def _collect(
+    session: SessionData,
+    index: int,
+    condition: Condition,
+    params: Callable[[str], LearnerParams],
+    children: Children | None,
+    cluster: str,
+) -> None:
+    toys = session.toys
+    builder = ProblemBuilder(toys, session.answer_key, params(session.profile), group=index)
+    feedback = condition.feedback_by_cluster.setdefault(cluster, Feedback())
+    for walked in walk(session):
+        record, child = walked.record, walked.child_index
+        if isinstance(record, TrialRecord):
+            if walked.undone:
+                condition.undone += 1
+                continue
+            if len(record.q_after) != len(toys):
+                continue  # damage the index warned about
+            builder.add(record)
+            feedback.add(record)
+            condition.feedback_by_position.setdefault(record.child_index + 1, Feedback()).add(
+                record
+            )
+            if children is not None:
+                children.child(session, record.child_index, condition.label).answer(record)
+        elif children is not None and child is not None:
+            measures = children.child(session, child, condition.label)
+            if isinstance(record, PromptRecord):
+                measures.prompts += 1
+            elif isinstance(record, PressRecord):
+                measures.extra_presses += 1
+            elif isinstance(record, UndoRecord):
+                measures.undos += 1
+    condition.problems.extend(Problem(toys, record, cluster) for record in builder.problems())
 
 
 def pooled(conditions: Sequence[Condition]) -> Condition:
@@ -91,4 +166,9 @@ def pooled(conditions: Sequence[Condition]) -> Condition:
     for condition in conditions:
         everything.sessions.extend(condition.sessions)
         everything.problems.extend(condition.problems)
+        everything.undone += condition.undone
+        for cluster, counts in condition.feedback_by_cluster.items():
+            everything.feedback_by_cluster.setdefault(cluster, Feedback()).merge(counts)
+        for position, counts in condition.feedback_by_position.items():
+            everything.feedback_by_position.setdefault(position, Feedback()).merge(counts)
     return everything

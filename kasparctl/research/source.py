@@ -1,26 +1,30 @@
 """Where the research commands read sessions from: --state-dir, or the config's state_dir.
 
-Kept to two rules so a researcher can predict it: an explicit --state-dir
-wins; otherwise the configuration (--config, else $KASPAR_CONFIG, else
-/etc/kaspar/kaspar.toml) names it. A configuration given with --config is
-also where learner profiles beyond the built-in ones are defined.
+Kept to two rules so a researcher can predict it: explicit --state-dir options
+win (several pool robots or days into one study); otherwise the configuration
+(--config, else $KASPAR_CONFIG, else /etc/kaspar/kaspar.toml) names it. A
+configuration given with --config is also where learner profiles beyond the
+built-in ones are defined.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from kasparctl.config import Config, ConfigError, default_config_path, load_config
 from kasparctl.learning.learner import LearnerParams
 from kasparctl.research.catalogue import (
+    Catalogue,
     CatalogueError,
     SessionData,
     find_sessions,
-    load_session,
+    open_sessions,
 )
+from kasparctl.research.participants import Participants
 from kasparctl.research.progress import progress
 
 
@@ -28,8 +32,10 @@ class SourceError(Exception):
     """No usable state directory or configuration; the message says what to give."""
 
 
-def add_source_arguments(parser: argparse.ArgumentParser, sessions: bool = True) -> None:
-    """Add SESSION..., --state-dir and --config to a research command's parser."""
+def add_source_arguments(
+    parser: argparse.ArgumentParser, sessions: bool = True, condition: bool = False
+) -> None:
+    """Add SESSION..., --state-dir and --config (and --condition) to a research command."""
     if sessions:
         parser.add_argument(
             "sessions",
@@ -38,7 +44,12 @@ def add_source_arguments(parser: argparse.ArgumentParser, sessions: bool = True)
             help="session ids or session directories (default: every session)",
         )
     parser.add_argument(
-        "--state-dir", default=None, help="the robot's state directory (default: the config's)"
+        "--state-dir",
+        action="append",
+        default=None,
+        metavar="DIR",
+        help="a robot's state directory (default: the config's); repeat to pool several "
+        "robots or days",
     )
     parser.add_argument(
         "--config",
@@ -46,14 +57,26 @@ def add_source_arguments(parser: argparse.ArgumentParser, sessions: bool = True)
         help="kaspar.toml whose state_dir and learner profiles to use "
         "(default: $KASPAR_CONFIG or /etc/kaspar/kaspar.toml)",
     )
+    if condition:
+        parser.add_argument(
+            "--condition",
+            default=None,
+            metavar="LABEL",
+            help="only the sessions of this condition (profile/spoken or profile/silent)",
+        )
 
 
 @dataclass(frozen=True)
 class Source:
     """Where the sessions are, and the configuration whose learner profiles apply."""
 
-    state_dir: Path | None
+    state_dirs: tuple[Path, ...]
     config: Config | None
+
+    @property
+    def state_dir(self) -> Path | None:
+        """The first state directory, if any (for messages)."""
+        return self.state_dirs[0] if self.state_dirs else None
 
     def params(self, profile: str) -> LearnerParams:
         """A profile's learner parameters: the config's, else the built-in ones."""
@@ -72,10 +95,10 @@ def resolve_source(arguments: argparse.Namespace, needs_state_dir: bool = True) 
     config = None
     if arguments.config is not None:
         config = _load(arguments.config)
-    if arguments.state_dir is not None:
-        state_dir = Path(arguments.state_dir)
+    if arguments.state_dir:
+        state_dirs = [Path(d) for d in arguments.state_dir]
     elif not needs_state_dir:
-        return Source(None, config)
+        return Source((), config)
     else:
         if config is None:
             path = default_config_path()
@@ -85,10 +108,16 @@ def resolve_source(arguments: argparse.Namespace, needs_state_dir: bool = True) 
                     f"(the default configuration {path} does not exist)"
                 )
             config = _load(path)
-        state_dir = Path(config.state_dir)
-    if not state_dir.is_dir():
-        raise SourceError(f"{state_dir}: no such state directory")
-    return Source(state_dir, config)
+        state_dirs = [Path(config.state_dir)]
+    for state_dir in state_dirs:
+        try:
+            if not state_dir.is_dir():
+                raise SourceError(f"{state_dir}: no such state directory")
+        except PermissionError:
+            raise SourceError(f"{state_dir}: permission denied") from None
+    # The same directory twice is one source, not two copies of every session.
+    unique = list(dict.fromkeys(state_dirs))
+    return Source(tuple(unique), config)
 
 
 def _load(path: str) -> Config:
@@ -98,22 +127,64 @@ def _load(path: str) -> Config:
         raise SourceError(str(error)) from error
 
 
-def read_sessions(arguments: argparse.Namespace) -> tuple[Source, list[SessionData]]:
-    """The sessions the command names (all by default), each record warning on stderr."""
+def read_sessions(
+    arguments: argparse.Namespace, report_damaged: bool = True
+) -> tuple[Source, Catalogue]:
+    """The sessions the command names (all by default); every warning and damage on stderr.
+
+    A session that cannot be read is reported (one line: which file, and why;
+    `report_damaged` False for a command that lists it itself) and left out; the
+    command goes on with every other one.
+    """
     names = list(getattr(arguments, "sessions", None) or ())
     # Sessions named by their directory need no state directory at all.
     paths_only = bool(names) and all(Path(name).is_dir() for name in names)
     source = resolve_source(arguments, needs_state_dir=not paths_only)
     try:
-        directories = find_sessions(source.state_dir, names)
-        sessions = [
-            load_session(directory)
-            for directory in progress(directories, "reading sessions", "session")
-        ]
+        directories = find_sessions(source.state_dirs, names)
     except CatalogueError as error:
         raise SourceError(str(error)) from error
-    for session in sessions:
+    catalogue = open_sessions(progress(directories, "reading sessions", "session"))
+    wanted = getattr(arguments, "condition", None)
+    if wanted is not None:
+        conditions = sorted({s.condition for s in catalogue.sessions})
+        if wanted not in conditions:
+            raise SourceError(
+                f"--condition: expected one of {', '.join(conditions) or 'none (no sessions)'}, "
+                f"found {wanted!r}"
+            )
+        catalogue.sessions = [s for s in catalogue.sessions if s.condition == wanted]
+    for session in catalogue.sessions:
         for warning in session.warnings:
             # Never silently dropped: a damaged line is data a researcher may be missing.
             print(f"warning: {warning}", file=sys.stderr)
-    return source, sessions
+    for damaged in catalogue.damaged if report_damaged else ():
+        print(f"warning: session left out, damaged: {damaged.reason}", file=sys.stderr)
+    for duplicate in catalogue.duplicates:
+        print(f"warning: {duplicate}", file=sys.stderr)
+    return source, catalogue
+
+
+def input_files(arguments: argparse.Namespace) -> list[tuple[str, str]]:
+    """The files a command reads besides the sessions: no output may replace them."""
+    files = []
+    for option in ("config", "participants"):
+        path = getattr(arguments, option, None)
+        if path is not None:
+            files.append((f"--{option}", str(path)))
+    return files
+
+
+def report_unknown_codes(sessions: Sequence[SessionData], participants: Participants) -> None:
+    """Warn (stderr) about participant codes in the plans that participants.csv lacks."""
+    if participants.path is None:
+        return
+    unknown = sorted(
+        {code for s in sessions for code in s.participants if code not in participants.rows}
+    )
+    if unknown:
+        print(
+            f"warning: {participants.path}: no row for {', '.join(unknown)} (in the sessions' "
+            "plans): their attribute columns are empty",
+            file=sys.stderr,
+        )

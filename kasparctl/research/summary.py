@@ -1,48 +1,67 @@
-"""The paper's figures per condition, as JSON (for scripts) and Markdown (for people).
+"""The paper's figures per condition, with intervals: JSON for scripts, Markdown for people.
 
 The statistics are kasparctl.learning.study_stats' (the simulator's own), so a report
 on recorded sessions and `kasparctl simulate` measure the same things. Added
-here only what needs the answer key and the children's turns: how often the
-children's feedback was wrong, and how often each child's was right.
+here: how often the children's feedback was wrong, what preceded Kaspar's
+perseverative errors and win-shifts, 95 % cluster-bootstrap intervals
+(kasparctl.research.inference), contrasts between conditions and between
+groups of participants, and each child's teaching measures.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import msgspec
 
-from kasparctl.research.conditions import Condition, pooled
+from kasparctl.research.conditions import Condition
+from kasparctl.research.inference import MEASURES, Contrast, Intervals
+from kasparctl.research.output import write_bytes
+
+
+@dataclass(frozen=True)
+class Method:
+    """How the intervals were made: resamples, seed, unit."""
+
+    replicates: int
+    seed: int
+    unit: str
+    level: float = 0.95
 
 
 def feedback_counts(condition: Condition) -> dict[str, Any]:
     """Children's answers checked against the answer key, where the plan has one."""
-    checked = [t for t in condition.trials if t.feedback_right is not None]
-    by_child: dict[int, list[bool]] = {}
-    for trial in checked:
-        by_child.setdefault(trial.child_index + 1, []).append(bool(trial.feedback_right))
+    total = condition.feedback
     return {
-        "feedback_checked": len(checked),
+        "feedback_checked": total.checked,
         # A green for a wrong guess teaches the wrong toy; a red for a right one delays it.
-        "wrong_green": sum(1 for t in checked if t.green and not t.correct),
-        "wrong_red": sum(1 for t in checked if not t.green and t.correct),
+        "wrong_green": total.wrong_green,
+        "wrong_red": total.wrong_red,
+        "wrong_guesses": total.wrong_guesses,
+        "right_guesses": total.right_guesses,
         "feedback_by_child": [
-            {"child": child, "checked": len(rights), "right": sum(rights)}
-            for child, rights in sorted(by_child.items())
+            {"child": child, "checked": counts.checked, "right": counts.right}
+            for child, counts in sorted(condition.feedback_by_position.items())
+            if counts.checked
         ],
     }
 
 
-def condition_summary(condition: Condition) -> dict[str, Any]:
-    """One condition's column of the summary: sessions, problems, statistics, feedback."""
+def condition_summary(condition: Condition, found: Intervals) -> dict[str, Any]:
+    """One condition's column of the summary: sessions, problems, statistics, intervals."""
     sessions = condition.sessions
+    stats = msgspec.to_builtins(condition.stats)
     return {
         "condition": condition.label,
         "sessions": len(sessions),
+        "session_ids": [s.uid for s in sessions],
+        "robots": sorted({s.robot for s in sessions if s.robot}),
         "groups": sorted({s.group for s in sessions}),
         "variants": sorted({s.variant for s in sessions}),
+        "clusters": len(condition.clusters),
         "finished": sum(1 for s in sessions if s.status == "finished"),
         "stopped": sum(1 for s in sessions if s.status == "stopped"),
         "interrupted": sum(1 for s in sessions if s.status == "interrupted"),
@@ -50,23 +69,51 @@ def condition_summary(condition: Condition) -> dict[str, Any]:
         "problems_with_answer_key": sum(
             1 for p in condition.problems if p.record.trials[0].correct is not None
         ),
-        **msgspec.to_builtins(condition.stats),
+        **stats,
+        "entropy_by_trial_low": [e.low for e in found.entropy_by_trial],
+        "entropy_by_trial_high": [e.high for e in found.entropy_by_trial],
         **feedback_counts(condition),
+        "intervals": {name: estimate.plain() for name, estimate in found.measures.items()},
+        "trials_to_learn_shares": [
+            {"trials": found.trials_bins_start + index, **estimate.plain()}
+            for index, estimate in enumerate(found.trials_share)
+        ],
     }
 
 
-def build_summary(conditions: Sequence[Condition]) -> dict[str, Any]:
-    """The report's summary.json: every condition, and all of them pooled."""
+def build_summary(
+    conditions: Sequence[Condition],
+    everything: Condition,
+    intervals: dict[str, Intervals],
+    method: Method,
+    contrasts: Sequence[Contrast] = (),
+    children: Sequence[dict[str, Any]] = (),
+    participants_file: str | None = None,
+) -> dict[str, Any]:
+    """The report's summary.json: every condition, all of them pooled, contrasts, children."""
+    sessions = everything.sessions
     return {
-        "sessions": [s.id for c in conditions for s in c.sessions],
-        "conditions": [condition_summary(c) for c in conditions],
-        "all": condition_summary(pooled(conditions)),
+        "sessions": [s.uid for s in sessions],
+        "session_names": [s.name for s in sessions],
+        "robots": sorted({s.robot for s in sessions if s.robot}),
+        "intervals": {
+            "method": "cluster bootstrap, percentile",
+            "level": method.level,
+            "replicates": method.replicates,
+            "seed": method.seed,
+            "unit": method.unit,
+        },
+        "conditions": [condition_summary(c, intervals[c.label]) for c in conditions],
+        "all": condition_summary(everything, intervals["all"]),
+        "contrasts": [c.plain() for c in contrasts],
+        "participants_file": participants_file,
+        "children": list(children),
     }
 
 
 def write_json(path: Path, summary: dict[str, Any]) -> None:
-    """Write the summary as indented JSON."""
-    path.write_bytes(msgspec.json.format(msgspec.json.encode(summary), indent=2) + b"\n")
+    """Write the summary as indented JSON (atomically)."""
+    write_bytes(path, msgspec.json.format(msgspec.json.encode(summary), indent=2) + b"\n")
 
 
 # -- Markdown ---------------------------------------------------------------------
@@ -80,27 +127,56 @@ def _mean_sd(mean: float | None, sd: float | None, digits: int = 2) -> str:
     return "-" if mean is None else f"{mean:.{digits}f} ± {_number(sd, digits)}"
 
 
+def plural(unit: str) -> str:
+    """A cluster unit in the plural: groups, sessions, children."""
+    return "children" if unit == "child" else unit + "s"
+
+
+def percent(value: float) -> str:
+    """A share as a percentage to 0.1 % (1 of 440 is 0.2 %, never 0 %)."""
+    return f"{100 * value:.1f} %"
+
+
 def _share(count: int, total: int | None) -> str:
     if not total:
         return f"{count}"
-    return f"{count} of {total} ({100 * count / total:.0f} %)"
+    return f"{count} of {total} ({percent(count / total)})"
+
+
+def _interval(estimate: dict[str, Any], digits: int = 2, share: bool = False) -> str:
+    low, high = estimate.get("low"), estimate.get("high")
+    if low is None or high is None:
+        return ""
+    if share:
+        return f" [{100 * low:.1f}, {100 * high:.1f}]"
+    return f" [{low:.{digits}f}, {high:.{digits}f}]"
 
 
 def _rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
     s = summary
+    ci = s["intervals"]
+
+    def attributed(wrong: int, explore: int) -> str:
+        return f"; after wrong feedback {wrong}, exploratory {explore}" if wrong or explore else ""
+
     return [
         (
             "Sessions (finished / stopped / interrupted)",
             f"{s['sessions']} ({s['finished']} / {s['stopped']} / {s['interrupted']})",
         ),
         ("Groups", ", ".join(s["groups"])),
+        ("Clusters resampled", str(s["clusters"])),
         (
             "Problems (learned / not learned)",
-            f"{s['problems']} ({s['problems_learned']} / {s['problems_given_up']})",
+            f"{s['problems']} ({s['problems_learned']} / {s['problems_given_up']})"
+            + _interval(ci["problems_learned_rate"], share=True),
         ),
         ("Problems learned with a wrong toy", str(s["problems_learned_wrong"])),
         ("Trials", str(s["trials_total"])),
-        ("Trials to learn, mean ± sd", _mean_sd(s["trials_mean"], s["trials_sd"])),
+        (
+            "Trials to learn, mean ± sd",
+            _mean_sd(s["trials_mean"], s["trials_sd"]) + _interval(ci["trials_mean"]),
+        ),
         (
             "Trials to learn, min - max",
             "-" if s["trials_min"] is None else f"{s['trials_min']} - {s['trials_max']}",
@@ -108,25 +184,46 @@ def _rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
         (
             "First guess correct",
             _share(s["first_guess_correct"], s["problems_with_answer_key"])
+            + _interval(ci["first_guess_correct_rate"], share=True)
             if s["problems_with_answer_key"]
             else "no answer key",
         ),
-        ("Perseverative errors", _share(s["perseverative_errors"], s["trials_total"])),
-        ("Win-shifts", _share(s["win_shifts"], s["trials_total"])),
+        (
+            "Perseverative errors",
+            _share(s["perseverative_errors"], s["trials_total"])
+            + _interval(ci["perseverative_error_rate"], share=True)
+            + attributed(s["perseverative_after_wrong_feedback"], s["perseverative_exploratory"]),
+        ),
+        (
+            "Win-shifts",
+            _share(s["win_shifts"], s["trials_total"])
+            + _interval(ci["win_shift_rate"], share=True)
+            + attributed(s["win_shifts_after_wrong_feedback"], s["win_shifts_exploratory"]),
+        ),
         ("Entropy before the first guess (bits)", _number(s["initial_entropy"], 3)),
         (
             "Final entropy, before the last guess (bits)",
-            _mean_sd(s["final_entropy_mean"], s["final_entropy_sd"]),
+            _mean_sd(s["final_entropy_mean"], s["final_entropy_sd"])
+            + _interval(ci["final_entropy_mean"]),
         ),
         (
             "Final entropy, after the last update (bits)",
-            _mean_sd(s["final_entropy_after_mean"], s["final_entropy_after_sd"]),
+            _mean_sd(s["final_entropy_after_mean"], s["final_entropy_after_sd"])
+            + _interval(ci["final_entropy_after_mean"]),
         ),
         ("Answers checked against the answer key", str(s["feedback_checked"])),
-        ("Wrong greens (green for a wrong guess)", str(s["wrong_green"])),
-        ("Wrong reds (red for a right guess)", str(s["wrong_red"])),
         (
-            "Feedback right, per child",
+            "Wrong greens (green for a wrong guess)",
+            _share(s["wrong_green"], s["wrong_guesses"])
+            + _interval(ci["wrong_green_rate"], share=True),
+        ),
+        (
+            "Wrong reds (red for a right guess)",
+            _share(s["wrong_red"], s["right_guesses"])
+            + _interval(ci["wrong_red_rate"], share=True),
+        ),
+        (
+            "Feedback right, per place in the turn order",
             ", ".join(
                 f"{c['child']}: {_share(c['right'], c['checked'])}" for c in s["feedback_by_child"]
             )
@@ -136,8 +233,101 @@ def _rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
     ]
 
 
+_MEASURE_LABELS = {m.name: m.label for m in MEASURES}
+_MEASURE_LABELS.update(
+    false_green_rate="False greens, of wrong guesses",
+    false_red_rate="False reds, of right guesses",
+    reaction_time_mean="Reaction time, mean (s)",
+    prompts_per_answer="Prompts per answer",
+    extra_presses_per_answer="Extra presses per answer",
+    undos_per_answer="Undos per answer",
+)
+_SHARES = {m.name for m in MEASURES if m.unit == "share"} | {
+    "false_green_rate",
+    "false_red_rate",
+}
+
+
+def _value(measure: str, value: float | None) -> str:
+    if value is None:
+        return "-"
+    return percent(value) if measure in _SHARES else f"{value:.3f}"
+
+
+def _contrast_table(contrasts: Sequence[dict[str, Any]]) -> list[str]:
+    lines = [
+        "| factor | A - B | measure | A | B | difference [95 % CI] | Hedges' g [95 % CI] "
+        "| clusters |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for c in contrasts:
+        measure = c["measure"]
+        share = measure in _SHARES
+        difference = (
+            "-"
+            if c["difference"] is None
+            else (f"{100 * c['difference']:+.1f} points" if share else f"{c['difference']:+.3f}")
+            + _interval(
+                {"low": c["difference_low"], "high": c["difference_high"]},
+                digits=3,
+                share=share,
+            )
+        )
+        g = (
+            "-"
+            if c["hedges_g"] is None
+            else f"{c['hedges_g']:+.2f}"
+            + _interval({"low": c["hedges_g_low"], "high": c["hedges_g_high"]})
+        )
+        lines.append(
+            f"| {c['factor']} | {c['a']} - {c['b']} | {_MEASURE_LABELS.get(measure, measure)} "
+            f"| {_value(measure, c['a_value'])} | {_value(measure, c['b_value'])} "
+            f"| {difference} | {g} | {c['clusters_a']} / {c['clusters_b']} {plural(c['unit'])} |"
+        )
+    return lines
+
+
+CHILD_COLUMNS = (
+    ("child", "child"),
+    ("sessions", "sessions"),
+    ("answers", "answers"),
+    ("wrong feedback", "wrong_feedback_rate"),
+    ("false greens", "false_greens"),
+    ("false reds", "false_reds"),
+    ("reaction time, median (s)", "reaction_time_median"),
+    ("prompts", "prompts"),
+    ("extra presses", "extra_presses"),
+    ("undos", "undos"),
+)
+MAX_CHILD_ROWS = 60
+
+
+def _children_table(children: Sequence[dict[str, Any]]) -> list[str]:
+    lines = [
+        "| " + " | ".join(name for name, _ in CHILD_COLUMNS) + " |",
+        "| " + " | ".join("---" for _ in CHILD_COLUMNS) + " |",
+    ]
+    for row in children[:MAX_CHILD_ROWS]:
+        cells = []
+        for _, key in CHILD_COLUMNS:
+            value = row.get(key)
+            if key == "wrong_feedback_rate":
+                cells.append(
+                    "-" if value is None else _share(row["checked"] - row["right"], row["checked"])
+                )
+            elif isinstance(value, float):
+                cells.append(f"{value:.2f}")
+            else:
+                cells.append("-" if value is None else str(value))
+        lines.append("| " + " | ".join(cells) + " |")
+    if len(children) > MAX_CHILD_ROWS:
+        lines.append("")
+        lines.append(f"{len(children) - MAX_CHILD_ROWS} more children in children.csv.")
+    return lines
+
+
 def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[str]) -> str:
-    """The report's summary.md: the conditions side by side, then the figures and notes."""
+    """The report's summary.md: the conditions side by side, contrasts, children, figures."""
     columns = list(summary["conditions"])
     if len(columns) > 1:
         columns.append(summary["all"])
@@ -146,16 +336,36 @@ def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[st
     rows_by_column = [_rows(c) for c in columns]
     for index, (name, _) in enumerate(rows_by_column[0]):
         table.append([name, *(rows[index][1] for rows in rows_by_column)])
+    method = summary["intervals"]
     lines = [
         "# Kaspar sessions: summary",
         "",
         f"{len(summary['sessions'])} sessions, {summary['all']['trials_total']} trials, "
         f"{summary['all']['problems']} problems. Trials to learn and final entropies are over "
-        "learned problems; undone answers are not trials. Definitions: docs/research-data.md.",
+        "learned problems; undone answers are not trials. In brackets: 95 % intervals, "
+        f"cluster bootstrap over {plural(method['unit'])} ({method['replicates']} resamples, seed "
+        f"{method['seed']}); none with fewer than two. Definitions: docs/research-data.md.",
         "",
         *("| " + " | ".join(row) + " |" for row in table),
         "",
     ]
+    if summary["contrasts"]:
+        lines += [
+            "## Contrasts",
+            "",
+            "A - B, each side's clusters resampled; Hedges' g over the clusters' own values.",
+            "",
+        ]
+        lines += [*_contrast_table(summary["contrasts"]), ""]
+    if summary["children"]:
+        lines += [
+            "## Children",
+            "",
+            "By participant code (the plans' codes). Every measure and attribute, and the "
+            "children of sessions without codes (by session and place), are in children.csv.",
+            "",
+        ]
+        lines += [*_children_table(summary["children"]), ""]
     if figures:
         lines += ["## Figures", ""]
         lines += [f"- [{name}]({name}.svg) ([PNG]({name}.png))" for name in figures]

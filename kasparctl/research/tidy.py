@@ -3,8 +3,12 @@
 Plain CSV from the csv module, readable by R's read.csv and pandas' read_csv
 as it is: a header of snake_case names, booleans TRUE/FALSE (both read them
 as logical), an empty cell where a value is missing, numbers in full
-precision, times in UTC ISO 8601. docs/research-data.md documents every
-column; tests hold the two together.
+precision, times in UTC ISO 8601. A text cell a spreadsheet would evaluate
+(starting with =, +, -, @, a tab or a carriage return) starts with a "'".
+docs/research-data.md documents every column; tests hold the two together.
+
+Rows are streamed session by session, record by record: an export holds one
+row at a time, whatever the size of the sessions.
 """
 
 from __future__ import annotations
@@ -12,17 +16,17 @@ from __future__ import annotations
 import csv
 import json
 import re
-import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
-from pathlib import Path
 from typing import Any, TextIO
 
 from kasparctl.game.records import TrialRecord
 from kasparctl.game.session import record_to_plain
 from kasparctl.research.anonymise import NO_PSEUDONYMS, Pseudonyms
 from kasparctl.research.catalogue import SessionData
+from kasparctl.research.output import text_output
+from kasparctl.research.participants import NO_PARTICIPANTS, Participants
 from kasparctl.research.progress import progress
+from kasparctl.research.walk import walk
 
 # Fields of a record that are bookkeeping, not the event: in their own columns or nowhere.
 # learner_rng is the learner's generator state, internal to resuming.
@@ -36,17 +40,25 @@ def snake(name: str) -> str:
     return _NOT_SNAKE.sub("_", name.lower()).strip("_") or "toy"
 
 
+# What a spreadsheet reads as the start of a formula (OWASP's list): such text gets a "'".
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+
+
 def cell(value: Any) -> str:
-    """A value as a CSV cell: empty for None, TRUE/FALSE, floats in full, lists joined by ";"."""
+    """A value as a CSV cell: empty for None, TRUE/FALSE, numbers in full, lists joined by ";".
+
+    Text that a spreadsheet would evaluate as a formula is escaped with a leading "'".
+    """
     if value is None:
         return ""
     if isinstance(value, bool):
         return "TRUE" if value else "FALSE"
     if isinstance(value, float):
         return repr(value)
-    if isinstance(value, list | tuple):
-        return ";".join(str(item) for item in value)
-    return str(value)
+    if isinstance(value, int):
+        return str(value)
+    text = ";".join(str(item) for item in value) if isinstance(value, list | tuple) else str(value)
+    return "'" + text if text.startswith(FORMULA_STARTS) else text
 
 
 def toy_columns(sessions: Sequence[SessionData]) -> dict[str, str]:
@@ -66,13 +78,16 @@ def toy_columns(sessions: Sequence[SessionData]) -> dict[str, str]:
     return suffixes
 
 
-def trial_header(toys: dict[str, str]) -> list[str]:
-    """The trials CSV's columns, a column per toy for the per-toy values."""
+def trial_header(toys: dict[str, str], participants: Participants = NO_PARTICIPANTS) -> list[str]:
+    """The trials CSV's columns, a column per toy for the per-toy values and per attribute."""
+
     def per_toy(prefix: str) -> list[str]:
         return [prefix + suffix for suffix in toys.values()]
 
     return [
         "session",
+        "session_name",
+        "robot",
         "group",
         "condition",
         "profile",
@@ -84,7 +99,10 @@ def trial_header(toys: dict[str, str]) -> list[str]:
         "answer",
         "child",
         "child_number",
+        "participant",
+        *(f"participant_{column}" for column in participants.columns),
         "candidates",
+        "n_candidates",
         *per_toy("p_"),
         "entropy",
         "band",
@@ -97,6 +115,7 @@ def trial_header(toys: dict[str, str]) -> list[str]:
         *per_toy("q_after_"),
         "perseverative",
         "win_shift",
+        "error_cause",
         "correct",
         "feedback_right",
         "learned",
@@ -106,22 +125,36 @@ def trial_header(toys: dict[str, str]) -> list[str]:
 
 
 def trial_rows(
-    session: SessionData, toys: dict[str, str], anonymise: bool = False
+    session: SessionData,
+    toys: dict[str, str],
+    anonymise: bool = False,
+    participants: Participants = NO_PARTICIPANTS,
 ) -> Iterator[dict[str, Any]]:
-    """Every trial of a session, undone ones included and marked."""
+    """Every trial of a session, undone ones included and marked, streamed."""
     names = Pseudonyms(session.first_names()) if anonymise else NO_PSEUDONYMS
     answer_key = session.answer_key
-    for trial in session.all_trials:
+    identity = session.identity
+    for walked in walk(session):
+        trial = walked.record
+        if not isinstance(trial, TrialRecord):
+            continue
         target_index, child_index = trial.target_index, trial.child_index
+        code = session.participant(child_index)
         row: dict[str, Any] = {
-            **session.identity,
+            **identity,
             "trial": trial.trial,
             "problem_trial": trial.problem_trial,
             "target": trial.target,
             "answer": answer_key[target_index] if 0 <= target_index < len(answer_key) else None,
             "child": f"child {child_index + 1}" if anonymise else names.text(trial.child),
             "child_number": child_index + 1,
+            "participant": code,
+            **{
+                f"participant_{column}": value
+                for column, value in participants.attributes(code).items()
+            },
             "candidates": trial.candidates,
+            "n_candidates": len(trial.candidates),
             "entropy": trial.entropy,
             "band": trial.band,
             "spoken": names.text(" ".join(trial.spoken)) or None,
@@ -131,10 +164,11 @@ def trial_rows(
             "reward": trial.reward,
             "perseverative": trial.perseverative,
             "win_shift": trial.win_shift,
+            "error_cause": walked.cause,
             "correct": trial.correct,
             "feedback_right": trial.feedback_right,
             "learned": trial.learned,
-            "undone": trial.trial in session.undone,
+            "undone": walked.undone,
             "time": trial.time,
         }
         for prefix, values in _per_toy(trial):
@@ -150,6 +184,8 @@ def _per_toy(trial: TrialRecord) -> tuple[tuple[str, list[float]], ...]:
 
 EVENT_HEADER = [
     "session",
+    "session_name",
+    "robot",
     "group",
     "condition",
     "seq",
@@ -158,6 +194,7 @@ EVENT_HEADER = [
     "kind",
     "name",
     "trial",
+    "participant",
     "detail",
 ]
 
@@ -177,7 +214,8 @@ def event_rows(session: SessionData, anonymise: bool = False) -> Iterator[dict[s
     """Every record that is not a trial: commands, presses, prompts, faults, HAL events,
     steps, poses, undos and the session's start and resumes."""
     names = Pseudonyms(session.first_names()) if anonymise else NO_PSEUDONYMS
-    for typed in session.records:
+    for walked in walk(session):
+        typed = walked.record
         if isinstance(typed, TrialRecord):
             continue
         # One table for every kind: each record as the plain object it is on disk.
@@ -191,8 +229,11 @@ def event_rows(session: SessionData, anonymise: bool = False) -> Iterator[dict[s
         }
         name_field = _EVENT_NAME.get(str(kind))
         name = detail.pop(name_field, None) if name_field else None
+        child = walked.child_index
         yield {
-            "session": session.id,
+            "session": session.uid,
+            "session_name": session.name,
+            "robot": session.robot,
             "group": session.group,
             "condition": session.condition,
             "seq": record.get("seq"),
@@ -201,53 +242,63 @@ def event_rows(session: SessionData, anonymise: bool = False) -> Iterator[dict[s
             "kind": kind,
             "name": names.value(name),
             "trial": record.get("trial"),
+            "participant": None if child is None else session.participant(child),
             "detail": json.dumps(names.value(detail), sort_keys=True) if detail else None,
         }
 
 
-@contextmanager
-def _open_csv(path: Path | str) -> Iterator[TextIO]:
-    if str(path) == "-":
-        yield sys.stdout
-        return
-    with open(path, "w", newline="", encoding="utf-8") as stream:
-        yield stream
-
-
 def _write(
-    path: Path | str,
+    target: str,
     header: list[str],
     sessions: Sequence[SessionData],
     rows_of: Callable[[SessionData], Iterable[dict[str, Any]]],
     what: str,
 ) -> int:
     count = 0
-    with _open_csv(path) as stream:
-        writer = csv.writer(stream, lineterminator="\n")
-        writer.writerow(header)
-        for session in progress(sessions, what, "session"):
-            for row in rows_of(session):
-                writer.writerow([cell(row.get(column)) for column in header])
-                count += 1
+    with text_output(target) as stream:
+        count = write_rows(stream, header, sessions, rows_of, what)
     return count
 
 
-def write_trials(path: Path | str, sessions: Sequence[SessionData], anonymise: bool) -> int:
-    """The trials CSV; returns the number of rows (undone trials included)."""
+def write_rows(
+    stream: TextIO,
+    header: list[str],
+    sessions: Sequence[SessionData],
+    rows_of: Callable[[SessionData], Iterable[dict[str, Any]]],
+    what: str,
+) -> int:
+    """The header and every session's rows as CSV on `stream`; returns the number of rows."""
+    writer = csv.writer(stream, lineterminator="\n")
+    writer.writerow(header)
+    count = 0
+    for session in progress(sessions, what, "session"):
+        for row in rows_of(session):
+            writer.writerow([cell(row.get(column)) for column in header])
+            count += 1
+    return count
+
+
+def write_trials(
+    target: str,
+    sessions: Sequence[SessionData],
+    anonymise: bool,
+    participants: Participants = NO_PARTICIPANTS,
+) -> int:
+    """The trials CSV ("-": stdout); returns the number of rows (undone trials included)."""
     toys = toy_columns(sessions)
     return _write(
-        path,
-        trial_header(toys),
+        target,
+        trial_header(toys, participants),
         sessions,
-        lambda session: trial_rows(session, toys, anonymise),
+        lambda session: trial_rows(session, toys, anonymise, participants),
         "exporting trials",
     )
 
 
-def write_events(path: Path | str, sessions: Sequence[SessionData], anonymise: bool) -> int:
+def write_events(target: str, sessions: Sequence[SessionData], anonymise: bool) -> int:
     """The events CSV (every record that is not a trial); returns the number of rows."""
     return _write(
-        path,
+        target,
         EVENT_HEADER,
         sessions,
         lambda session: event_rows(session, anonymise),

@@ -348,6 +348,7 @@ class Daemon:
                 "seed": seed,
                 "plan": msgspec.to_builtins(plan),
             },
+            robot=self.config.robot(),
         )
         state = GameState.new(self.config.game, self.config.profile(plan.profile), seed)
         log.info("session opened", session=session.id, group=plan.group, condition=plan.condition)

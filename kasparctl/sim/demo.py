@@ -36,7 +36,7 @@ from kasparctl.game.state import GameState, restore
 from kasparctl.sim import simtime
 from kasparctl.sim.children import MAX_RESUMES, Hands, SimulatedGroup
 from kasparctl.sim.simulate import draw_answer_key
-from kasparctl.sim.teacher import Teacher
+from kasparctl.sim.teacher import DEFAULT_THINK_S, Teacher
 
 
 def with_variant(config: Config, variant: str) -> Config:
@@ -70,6 +70,8 @@ class DemoOptions:
     state_dir: Path
     seed: int = 0
     teacher: Teacher = field(default_factory=Teacher)
+    # How long the simulated children think before pressing: uniform in this range (s).
+    think_s: tuple[float, float] = DEFAULT_THINK_S
     interactive: bool = False
     # Printed lines: the dialogue and what the children and the robot do (the
     # stdout of the moment the demo runs, not of the moment this was imported).
@@ -194,6 +196,7 @@ def assemble(
                 "seed": options.seed,
                 "plan": msgspec.to_builtins(planned),
             },
+            robot=config.robot(),
         )
         state = GameState.new(config.game, config.profile(planned.profile), options.seed)
         return session, planned, state
@@ -213,6 +216,7 @@ def assemble(
             children_answers if children_answers is not None else answers,
             np.random.default_rng([options.seed, 1, progress]),
             pointing_group=config.game.pointing_group,
+            think_s=options.think_s,
             narrate=narrate,
             patience=patience,
         )

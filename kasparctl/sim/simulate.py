@@ -19,7 +19,7 @@ groups run.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -33,8 +33,8 @@ from kasparctl.learning.learner import (
     softmax,
     update,
 )
-from kasparctl.learning.study_stats import ProblemRecord, TrialRecord
-from kasparctl.sim.teacher import Teacher
+from kasparctl.learning.study_stats import ProblemRecord, StatsAccumulator, StudyStats, TrialRecord
+from kasparctl.sim.teacher import Teacher, TeacherModel
 
 PILOT_LOCATIONS = ("location 1", "location 2", "location 3")
 
@@ -84,12 +84,15 @@ def draw_answer_key(game: GameSettings, rng: np.random.Generator) -> tuple[int, 
 def simulate_group(
     game: GameSettings,
     params: LearnerParams,
-    teacher: Teacher,
+    teacher: Teacher | TeacherModel,
     rng: np.random.Generator,
     group: int = 0,
     answers: Sequence[int] | None = None,
 ) -> list[ProblemRecord]:
-    """One group's game: every target in order, each until learned or given up."""
+    """One group's game: every target in order, each until learned or given up.
+
+    With a TeacherModel the children answer in turn, each with their own rates.
+    """
     n_targets, n_toys = len(game.targets), len(game.toys)
     if answers is None:
         answers = draw_answer_key(game, rng)
@@ -99,6 +102,7 @@ def simulate_group(
         )
     table = new_table(n_targets, n_toys, params)
     offered = np.ones(n_toys, dtype=bool)
+    turn = 0
     records: list[ProblemRecord] = []
     for target in range(n_targets):
         # The candidates change only between targets, when a name is learned.
@@ -110,7 +114,12 @@ def simulate_group(
             entropy = entropy_bits(probabilities)
             choice = choose(probabilities, rng)
             correct = choice == answers[target]
-            feedback = teacher.answer(correct, rng)
+            feedback = (
+                teacher.answer(correct, rng, turn)
+                if isinstance(teacher, TeacherModel)
+                else teacher.answer(correct, rng)
+            )
+            turn += 1
             progress.record(choice, feedback)
             if feedback is not None:
                 table = update(
@@ -133,6 +142,7 @@ def simulate_group(
                 learned=progress.learned,
                 final_q=tuple(float(q) for q in table[target]),
                 entropy_after=entropy_bits(softmax(table[target], params.beta, candidates)),
+                candidates=int(candidates.sum()),
             )
         )
     return records
@@ -152,18 +162,56 @@ def simulate_study(
     groups: int,
     game: GameSettings,
     params: LearnerParams,
-    teacher: Teacher,
+    teacher: Teacher | TeacherModel,
     seed: int | None,
     on_group: Callable[[int], None] | None = None,
 ) -> list[ProblemRecord]:
     """`groups` groups playing `game`; `on_group(g)` after each, for a progress bar."""
+    return [
+        record
+        for records in iter_groups(groups, game, params, teacher, seed, on_group)
+        for record in records
+    ]
+
+
+def iter_groups(
+    groups: int,
+    game: GameSettings,
+    params: LearnerParams,
+    teacher: Teacher | TeacherModel,
+    seed: int | None,
+    on_group: Callable[[int], None] | None = None,
+) -> Iterator[list[ProblemRecord]]:
+    """Each group's problems in turn, as simulate_study plays them, never held together."""
     if groups < 1:
         raise SimulationError(f"groups: expected >= 1, found {groups}")
     game = playable(game)
-    streams = np.random.SeedSequence(seed).spawn(groups)
-    records: list[ProblemRecord] = []
-    for group, stream in enumerate(streams):
-        records.extend(simulate_group(game, params, teacher, np.random.default_rng(stream), group))
-        if on_group is not None:
-            on_group(group)
-    return records
+    root = np.random.SeedSequence(seed)
+    # Spawned a block at a time: the same streams as spawning all at once, in bounded memory.
+    block = 4096
+    for start in range(0, groups, block):
+        for offset, stream in enumerate(root.spawn(min(block, groups - start))):
+            group = start + offset
+            yield simulate_group(game, params, teacher, np.random.default_rng(stream), group)
+            if on_group is not None:
+                on_group(group)
+
+
+def summarise_study(
+    groups: int,
+    game: GameSettings,
+    params: LearnerParams,
+    teacher: Teacher | TeacherModel,
+    seed: int | None,
+    on_group: Callable[[int], None] | None = None,
+) -> StudyStats:
+    """The statistics of simulate_study, accumulated group by group in constant memory."""
+    accumulator = StatsAccumulator()
+    batch: list[ProblemRecord] = []
+    for records in iter_groups(groups, game, params, teacher, seed, on_group):
+        batch.extend(records)
+        if len(batch) >= 4096:
+            accumulator.add(batch)
+            batch = []
+    accumulator.add(batch)
+    return accumulator.result()

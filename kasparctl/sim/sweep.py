@@ -144,6 +144,13 @@ def simulate_pilot_problems(
                 first_correct=out["first_correct"].astype(bool),
                 perseverative=out["perseverative"].astype(np.int64),
                 win_shift=out["win_shift"].astype(np.int64),
+                perseverative_after_wrong=out["perseverative_after_wrong"].astype(np.int64),
+                win_shift_after_wrong=out["win_shift_after_wrong"].astype(np.int64),
+                # Every answer is checked in a simulation: the rest were exploratory.
+                perseverative_exploratory=out["perseverative"].astype(np.int64)
+                - out["perseverative_after_wrong"].astype(np.int64),
+                win_shift_exploratory=out["win_shift"].astype(np.int64)
+                - out["win_shift_after_wrong"].astype(np.int64),
                 initial_entropy=out["initial_entropy"].astype(np.float64),
                 final_entropy=out["final_entropy"].astype(np.float64),
                 final_entropy_after=out["final_entropy_after"].astype(np.float64),
@@ -168,6 +175,8 @@ class _Chunk:
         "first_correct",
         "perseverative",
         "win_shift",
+        "perseverative_after_wrong",
+        "win_shift_after_wrong",
         "initial_entropy",
         "final_entropy",
         "final_entropy_after",
@@ -199,6 +208,10 @@ class _Chunk:
         self.previous_feedback = np.zeros(n, dtype=np.int8)
         self.perseverative = np.zeros(n, dtype=np.int64)
         self.win_shift = np.zeros(n, dtype=np.int64)
+        # Whether the children's previous answer disagreed with the guess being right.
+        self.previous_wrong = np.zeros(n, dtype=bool)
+        self.perseverative_after_wrong = np.zeros(n, dtype=np.int64)
+        self.win_shift_after_wrong = np.zeros(n, dtype=np.int64)
         self.first_correct = np.zeros(n, dtype=bool)
         self.initial_entropy = np.zeros(n)
         # Results, by position in the chunk.
@@ -209,6 +222,8 @@ class _Chunk:
             "first_correct": np.zeros(n, dtype=bool),
             "perseverative": np.zeros(n, dtype=np.int64),
             "win_shift": np.zeros(n, dtype=np.int64),
+            "perseverative_after_wrong": np.zeros(n, dtype=np.int64),
+            "win_shift_after_wrong": np.zeros(n, dtype=np.int64),
             "initial_entropy": np.zeros(n),
             "final_entropy": np.zeros(n),
             "final_entropy_after": np.zeros(n),
@@ -236,8 +251,12 @@ class _Chunk:
             self.initial_entropy = entropy
             self.first_correct = correct
         else:
-            self.perseverative += (self.previous_feedback == -1) & (choice == self.previous_choice)
-            self.win_shift += (self.previous_feedback == 1) & (choice != self.previous_choice)
+            perseverative = (self.previous_feedback == -1) & (choice == self.previous_choice)
+            win_shift = (self.previous_feedback == 1) & (choice != self.previous_choice)
+            self.perseverative += perseverative
+            self.win_shift += win_shift
+            self.perseverative_after_wrong += perseverative & self.previous_wrong
+            self.win_shift_after_wrong += win_shift & self.previous_wrong
 
         green = feedback == 1
         same = green & (choice == self.streak_label)
@@ -267,6 +286,7 @@ class _Chunk:
 
         self.previous_choice = choice
         self.previous_feedback = feedback
+        self.previous_wrong = ((feedback == 1) & ~correct) | ((feedback == -1) & correct)
         if done.any():
             self._finish(done, trial, choice, learned, entropy)
 
@@ -297,6 +317,8 @@ class _Chunk:
         out["first_correct"][where] = self.first_correct[done]
         out["perseverative"][where] = self.perseverative[done]
         out["win_shift"][where] = self.win_shift[done]
+        out["perseverative_after_wrong"][where] = self.perseverative_after_wrong[done]
+        out["win_shift_after_wrong"][where] = self.win_shift_after_wrong[done]
         out["initial_entropy"][where] = self.initial_entropy[done]
         out["final_entropy"][where] = entropy[done]
         out["final_entropy_after"][where] = after
@@ -315,6 +337,9 @@ class _Chunk:
             "previous_feedback",
             "perseverative",
             "win_shift",
+            "previous_wrong",
+            "perseverative_after_wrong",
+            "win_shift_after_wrong",
             "first_correct",
             "initial_entropy",
         ):
