@@ -175,8 +175,13 @@ async def test_a_cancellation_that_lands_with_the_reply_still_cancels(ax12, driv
     settle = bus_module._Job.resolve
 
     def settle_then_cancel(self, result=None, error=None) -> None:
-        settle(self, result, error)
-        loop.call_soon_threadsafe(reader.cancel)  # queued right behind the reply
+        def on_loop() -> None:
+            # Both queued from the loop in one callback, so nothing runs between them:
+            # the reply, then the cancellation, in the same loop turn.
+            settle(self, result, error)
+            loop.call_soon(reader.cancel)
+
+        loop.call_soon_threadsafe(on_loop)
 
     monkeypatch.setattr(bus_module._Job, "resolve", settle_then_cancel)
     reader = asyncio.create_task(driver.read_positions([1]))
