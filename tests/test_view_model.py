@@ -211,7 +211,7 @@ def test_the_session_as_recorded_before_question_records_existed() -> None:
         assert view.question is not None and view.question.trial == last.trial
         assert [bar.probability for bar in view.question.bars] == last.probabilities
         assert sorted(item.toy for item in view.learned) == sorted(
-            t.choice for t in known.trials if t.learned
+            t.choice for t in counted if t.learned
         )
 
 
