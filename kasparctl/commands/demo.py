@@ -29,6 +29,7 @@ from kasparctl.sim.demo import (
     DemoOptions,
     DemoResult,
     DemoStalled,
+    DemoStorageFailed,
     demo_config,
     run_demo,
     with_variant,
@@ -114,7 +115,7 @@ def run(arguments: argparse.Namespace) -> int:
             result = _with_view(config, options, arguments.speed)
         else:
             result = run_demo(config, options, speed=arguments.speed, fast=arguments.fast)
-    except (PhraseError, SessionError, ConfigError, DemoStalled) as error:
+    except (PhraseError, SessionError, ConfigError, DemoStalled, DemoStorageFailed) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
     finally:

@@ -30,9 +30,16 @@ from kasparctl.config import Config, SessionPlan, parse_config
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.machine import Game
 from kasparctl.game.phrases import PhrasePicker, load_phrasebook
-from kasparctl.game.session import EventLog, Session, find_unfinished
+from kasparctl.game.records import FaultSource
+from kasparctl.game.session import (
+    Abandoned,
+    EventLog,
+    Session,
+    frozen_learner,
+    resume_or_abandon,
+)
 from kasparctl.game.stages import ENDS
-from kasparctl.game.state import GameState, restore
+from kasparctl.game.state import GameState
 from kasparctl.sim import simtime
 from kasparctl.sim.children import MAX_RESUMES, Hands, SimulatedGroup
 from kasparctl.sim.simulate import draw_answer_key
@@ -111,27 +118,50 @@ class DemoRig(Generic[ServosT]):
     children: SimulatedGroup | None
     resumed: bool
     state_dir: Path
+    # Sessions found unfinished that could not be resumed, closed as abandoned.
+    abandoned: list[Abandoned] = field(default_factory=list)
+    # Why the records could not be saved, once they could not: the demo ends there.
+    storage_failed: str | None = None
 
     async def run(self) -> DemoResult:
-        """Start the simulated hardware, play (or resume) the session, close everything."""
+        """Start the simulated hardware, play (or resume) the session, close everything.
+
+        DemoStorageFailed when the records cannot be saved: nobody is there to free the
+        disk, so the demo ends (what was written stays; it resumes from there next time).
+        """
         await self.servos.start()
         for group in self.servos.groups:
             # Powered on limp; torque on holds each joint where it is (no jump).
             await self.servos.set_compliant(group, False)
         await self.keyfob.start()
+        storage = asyncio.Event()
+
+        def on_storage_fault(event: GameEvent, info: dict[str, Any]) -> None:
+            if event is GameEvent.FAULT and info.get("kind") is FaultSource.STORAGE:
+                self.storage_failed = str(info.get("detail"))
+                storage.set()
+
+        self.game.listeners.insert(0, on_storage_fault)
         try:
-            final = await self.game.run()
+            final = await _play_until(self.game, storage)
         finally:
             if self.children is not None:
                 await self.children.close()
             await self.keyfob.close()
             await self.voice.close()
             await self.servos.close()
+            self.game.flush_unwritten()
             if self.game.event_log is not None:
                 self.game.event_log.close()
+            if self.game.session is not None:
+                self.game.session.close()
         state, session = self.game.session_state, self.game.session
-        assert state is not None and session is not None
-        session.close()
+        if self.storage_failed is not None or state is None or session is None:
+            raise DemoStorageFailed(
+                f"the records cannot be saved: {self.storage_failed or 'no session was opened'}; "
+                f"what was written is kept in {self.state_dir}, and the session resumes from "
+                "there once the disk takes records again"
+            )
         return DemoResult(
             session=session.id,
             finished=final == "finished",
@@ -176,12 +206,18 @@ def assemble(
     book = load_phrasebook(config.language, config.phrases_dir)
     picker = PhrasePicker(book, np.random.default_rng([options.seed, 2]))
     plan = config.sessions[0] if config.sessions else SessionPlan(group="demo")
-    resumed = _resume(config, options.state_dir)
-    if resumed is not None:
+    outcome = resume_or_abandon(options.state_dir, config.game, config.profile)
+    for abandoned in outcome.abandoned:
+        why = abandoned.reason
+        narrate(f"session {abandoned.session_id} abandoned, it cannot be resumed: {why}")
+    resumed = None
+    if outcome.resumable is not None:
+        resumed = outcome.resumable.session, outcome.resumable.plan, outcome.resumable.state
         plan = resumed[1]
     answers = _answers(config, plan, options.seed)
 
     def open_session() -> tuple[Session, SessionPlan, GameState]:
+        params = config.profile(plan.profile)
         planned = msgspec.structs.replace(
             plan, answer_key=tuple(config.game.toys[a] for a in answers)
         )
@@ -193,9 +229,10 @@ def assemble(
                 "variant": config.game.variant,
                 "seed": options.seed,
                 "plan": msgspec.to_builtins(planned),
+                "learner": frozen_learner(planned.profile, params),
             },
         )
-        state = GameState.new(config.game, config.profile(planned.profile), options.seed)
+        state = GameState.new(config.game, params, options.seed)
         return session, planned, state
 
     hardware = Hardware(servos, keyfob, voice)
@@ -218,7 +255,10 @@ def assemble(
         )
         game.listeners.append(children)
     game.listeners.append(_narrator(narrate))
-    return DemoRig(game, servos, keyfob, voice, children, resumed is not None, options.state_dir)
+    return DemoRig(
+        game, servos, keyfob, voice, children, resumed is not None, options.state_dir,
+        outcome.abandoned,
+    )
 
 
 async def play(config: Config, options: DemoOptions) -> DemoResult:
@@ -226,16 +266,19 @@ async def play(config: Config, options: DemoOptions) -> DemoResult:
     return await build(config, options).run()
 
 
-def _resume(config: Config, state_dir: Path) -> tuple[Session, SessionPlan, GameState] | None:
-    directory = find_unfinished(state_dir)
-    if directory is None:
-        return None
-    session, _warnings = Session.open(directory)
-    plan = msgspec.convert(session.plan["plan"], type=SessionPlan)
-    snapshot, later = session.load_state()
-    params = config.profile(plan.profile)
-    state = restore(snapshot, later, config.game, params, session.plan.get("seed"))
-    return session, plan, state
+async def _play_until(game: Game, storage: asyncio.Event) -> str:
+    """Play the game to its end, or end it once the records cannot be saved."""
+    playing = asyncio.create_task(game.run(), name="demo game")
+    failed = asyncio.create_task(storage.wait())
+    try:
+        await asyncio.wait({playing, failed}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        failed.cancel()
+        # A cancellation inside a transitions trigger is swallowed: again until it ends.
+        while not playing.done():
+            playing.cancel()
+            await asyncio.wait({playing}, timeout=1.0)
+    return game.stage if playing.cancelled() else playing.result()
 
 
 def _answers(config: Config, plan: SessionPlan, seed: int) -> list[int]:
@@ -266,6 +309,10 @@ STALL_LIMIT_S = 12 * 3600.0
 
 class DemoStalled(Exception):
     """A simulated game that stopped making progress."""
+
+
+class DemoStorageFailed(Exception):
+    """The demo's records could not be saved (the disk full, the directory gone): it ended."""
 
 
 def run_demo(
