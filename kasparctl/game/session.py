@@ -40,7 +40,7 @@ from typing import Any, TypeVar
 import msgspec
 import structlog
 
-from kasparctl.config import GameSettings, SessionPlan
+from kasparctl.config import Config, GameSettings, ProfileSettings, SessionPlan
 from kasparctl.game.records import AnyRecord, Record, SessionEvent, SessionRecord
 from kasparctl.game.stages import STATES
 from kasparctl.game.state import GameState, StateError, restore
@@ -58,6 +58,9 @@ PRIVATE_FILE = 0o600
 PRIVATE_DIR = 0o700
 
 _encoder = msgspec.json.Encoder()
+# What decoding a file's bytes as JSON raises: msgspec's errors, and a byte that is not
+# UTF-8 inside a string or a key (msgspec raises Python's own error for that).
+UNDECODABLE = (msgspec.DecodeError, UnicodeDecodeError)
 RecordT = TypeVar("RecordT", bound=Record)
 
 
@@ -163,7 +166,7 @@ def read_json_lines(path: Path, repair: bool = False) -> JsonLines:
             record = msgspec.json.decode(line)
             if not isinstance(record, dict):
                 raise msgspec.DecodeError("not a JSON object")
-        except msgspec.DecodeError as error:
+        except UNDECODABLE as error:
             if number == len(lines) and not tail:
                 tail = line + b"\n"
                 break
@@ -281,7 +284,7 @@ def state_from_plain(plain: Any) -> GameState:
 def _decode_state(raw: bytes) -> GameState:
     try:
         plain = msgspec.json.decode(raw)
-    except msgspec.DecodeError as error:
+    except UNDECODABLE as error:
         raise StateError(f"unusable game state snapshot: {error!r}") from error
     return state_from_plain(plain)
 
@@ -449,7 +452,7 @@ class Session:
         """Reopen a session to carry on; returns it and any repair warnings."""
         try:
             plan = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
-        except (OSError, msgspec.DecodeError) as error:
+        except (OSError, *UNDECODABLE) as error:
             raise SessionError(f"{directory / PLAN_FILE}: cannot read the plan: {error}") from error
         read = read_json_lines(directory / RECORDS_FILE, repair=True)
         for warning in read.warnings:
@@ -487,7 +490,7 @@ class Session:
             return msgspec.json.decode(path.read_bytes(), type=_SnapshotIn)
         except FileNotFoundError:
             return None
-        except (OSError, msgspec.DecodeError) as error:
+        except (OSError, *UNDECODABLE) as error:
             if isinstance(error, msgspec.ValidationError):
                 log.error("session snapshot malformed, replaying all records", path=str(path))
                 return None
@@ -624,7 +627,7 @@ def is_finished(directory: Path) -> bool:
     """Whether a session's last snapshot says it ended (finished or stopped)."""
     try:
         snapshot = msgspec.json.decode((directory / STATE_FILE).read_bytes(), type=_SnapshotIn)
-    except (OSError, msgspec.DecodeError):
+    except (OSError, *UNDECODABLE):
         return False
     return snapshot.finished
 
@@ -657,6 +660,16 @@ class Resumable:
     session: Session
     plan: SessionPlan
     state: GameState
+    # The learner the session began with (frozen in its plan), or its profile's.
+    params: LearnerParams
+
+    def config(self, config: Config) -> Config:
+        """`config` with the plan's profile being the learner the session began with, so a
+        resumed game learns on as it did, whatever the configuration says now."""
+        frozen = ProfileSettings(**{name: getattr(self.params, name) for name in LEARNER_FIELDS})
+        profiles = {**config.learner.profiles, self.plan.profile: frozen}
+        learner = msgspec.structs.replace(config.learner, profiles=profiles)
+        return msgspec.structs.replace(config, learner=learner)
 
 
 @dataclass(frozen=True, slots=True)
@@ -719,7 +732,7 @@ def reopen(
         seed = plan_json.get("seed")
         if not isinstance(session_id, str) or not (seed is None or isinstance(seed, int)):
             raise msgspec.ValidationError("expected a session id and an integer seed")
-    except (msgspec.MsgspecError, KeyError) as error:
+    except (msgspec.MsgspecError, UnicodeDecodeError, KeyError) as error:
         raise CannotResume(directory, f"{plan_path}: not a session plan: {error}") from error
     params = _learner_of(plan_json, session_plan, profile, directory)
     try:
@@ -746,7 +759,7 @@ def reopen(
     except OSError as error:
         session.close()
         raise _storage_failed(directory / RECORDS_FILE, "cannot read", error) from error
-    return Resumable(session, session_plan, state)
+    return Resumable(session, session_plan, state, params)
 
 
 def _learner_of(
@@ -842,7 +855,7 @@ def _kept_state(path: Path) -> msgspec.Raw:
         return msgspec.Raw(b"null")
     try:
         return msgspec.json.decode(data, type=_SnapshotIn).state
-    except msgspec.DecodeError:
+    except UNDECODABLE:
         os.replace(path, path.with_name(path.name + DAMAGED_SUFFIX))
         return msgspec.Raw(b"null")
 
@@ -851,7 +864,7 @@ def abandoned_reason(directory: Path) -> str | None:
     """Why a session was abandoned, from its snapshot; None for any other session."""
     try:
         snapshot = msgspec.json.decode((directory / STATE_FILE).read_bytes(), type=_SnapshotIn)
-    except (OSError, msgspec.DecodeError):
+    except (OSError, *UNDECODABLE):
         return None
     return snapshot.abandoned
 

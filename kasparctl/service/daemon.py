@@ -53,8 +53,10 @@ from kasparctl.game.phrases import PhraseBook, PhrasePicker, load_phrasebook
 from kasparctl.game.records import FaultSource, Record, SessionEvent, SessionRecord
 from kasparctl.game.session import (
     PLAN_FILE,
+    UNDECODABLE,
     Abandoned,
     EventLog,
+    Resumable,
     Session,
     StorageFailed,
     abandoned_reason,
@@ -132,6 +134,7 @@ class Daemon:
         self._carried_problems: dict[FaultSource, str] = {}
         self._book: PhraseBook | None = None
         self._ending: asyncio.Task[None] | None = None
+        self._resumable: Resumable | None = None
         self._unwritten: Unwritten = []
         # A session abandoned at the last read: shown in STATUS= until the next one opens.
         self._notice: str | None = None
@@ -254,6 +257,7 @@ class Daemon:
     async def _one_session(self) -> None:
         assert self.hw is not None
         resumed = None
+        self._resumable = None
         self._read_again = False
         unread = True
         if self._take_lock():
@@ -278,7 +282,7 @@ class Daemon:
         assert self._book is not None  # read in _run
         picker = PhrasePicker(self._book, np.random.default_rng())
         game = Game(
-            self.config,
+            self._config_of(resumed),
             self.hw,
             picker,
             self._open_session,
@@ -377,6 +381,10 @@ class Daemon:
 
     # -- sessions --------------------------------------------------------------------
 
+    def _config_of(self, resumed: tuple[Session, SessionPlan, GameState] | None) -> Config:
+        """The configuration a game plays: a resumed session keeps the learner it began with."""
+        return self._resumable.config(self.config) if resumed and self._resumable else self.config
+
     def _resume(self) -> tuple[Session, SessionPlan, GameState] | None:
         """The unfinished session to carry on; each that cannot be is abandoned on the way.
 
@@ -386,7 +394,7 @@ class Daemon:
         outcome = resume_or_abandon(self.state_dir, self.config.game, self.config.profile, clock)
         for abandoned in outcome.abandoned:
             self._note_abandoned(abandoned, clock)
-        resumable = outcome.resumable
+        resumable = self._resumable = outcome.resumable
         if resumable is None:
             return None
         session, state = resumable.session, resumable.state
@@ -442,7 +450,7 @@ class Daemon:
         done = set()
         for directory in session_dirs(self.state_dir):
             if is_finished(directory) and abandoned_reason(directory) is None:
-                with contextlib.suppress(OSError, msgspec.DecodeError, KeyError, TypeError):
+                with contextlib.suppress(OSError, *UNDECODABLE, KeyError, TypeError):
                     done.add(msgspec.json.decode((directory / PLAN_FILE).read_bytes())["group"])
         return next((plan for plan in plans if plan.group not in done), plans[-1])
 

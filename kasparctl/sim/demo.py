@@ -214,6 +214,7 @@ def assemble(
     if outcome.resumable is not None:
         resumed = outcome.resumable.session, outcome.resumable.plan, outcome.resumable.state
         plan = resumed[1]
+        config = outcome.resumable.config(config)
     answers = _answers(config, plan, options.seed)
 
     def open_session() -> tuple[Session, SessionPlan, GameState]:
