@@ -51,14 +51,12 @@ def small_tmpfs(where: Path, size: str = "256k") -> Iterator[Path]:
 def fill(directory: Path) -> Path:
     """Fill the file system of `directory` to the last byte; the filler file's path."""
     filler = directory / "filler"
-    with filler.open("wb") as out:
-        block = b"\0" * 4096
-        with contextlib.suppress(OSError):
-            while True:
-                out.write(block)
-                out.flush()
-    with contextlib.suppress(OSError), filler.open("ab") as out:
-        while True:
-            out.write(b"\0")
-            out.flush()
+    fd = os.open(filler, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    try:
+        for size in (1 << 16, 4096, 1):
+            with contextlib.suppress(OSError):
+                while True:
+                    os.write(fd, b"\0" * size)
+    finally:
+        os.close(fd)
     return filler
