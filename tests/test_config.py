@@ -71,7 +71,7 @@ def test_relative_paths_are_relative_to_the_file(tmp_path: Path) -> None:
         ("[game]\ncorrect_answers_to_learn = 0", "kaspar.toml: game.correct_answers_to_learn: expected >= 1, found 0"),
         ("[game]\nmax_trials_per_target = 1", "kaspar.toml: game.max_trials_per_target: expected >= correct_answers_to_learn (2), found 1"),
         ("[learner.profiles.quick]\nalpha = 1.5", "kaspar.toml: learner.profiles.quick.alpha: expected a number in (0, 1], found 1.5"),
-        ("[learner.profiles.quick]\nbeta = -1.0", "kaspar.toml: learner.profiles.quick.beta: expected a number >= 0, found -1.0"),
+        ("[learner.profiles.quick]\nbeta = -1.0", "kaspar.toml: learner.profiles.quick.beta: expected a number from 0 to 1e+06, found -1.0"),
         ("[learner.profiles.quick]\ngamma = 1.0", "kaspar.toml: learner.profiles.quick.gamma: expected a number in [0, 1), found 1.0"),
         ("[learner.profiles.quick]\ninitial_q = nan", "kaspar.toml: learner.profiles.quick.initial_q: expected a finite number, found nan"),
         ("[learner.profiles.quick]\nalfa = 0.5", "kaspar.toml: learner.profiles.quick.alfa: unknown key; expected one of: alpha, beta,"),

@@ -360,6 +360,17 @@ class Joints:
 
     # --- inspection (check, `servos read`) -----------------------------------------------
 
+    def unavailable_buses(self) -> dict[str, str]:
+        """Each bus whose adapter is not open now, and why, naming the adapter (the joints
+        behind it cannot answer: one message for them all). Simulated buses are always open."""
+        from hal.servos.drivers import BusDriver
+
+        return {
+            name: driver.bus.unavailable()
+            for name, driver in self._drivers.items()
+            if isinstance(driver, BusDriver) and not driver.bus.connected
+        }
+
     async def ping_all(self) -> dict[str, int | None]:
         """Every joint's servo model number (0 where the protocol has none), None if silent."""
         found: dict[str, int | None] = {}
