@@ -135,7 +135,9 @@ def test_missing_file_is_named(tmp_path: Path) -> None:
 
 def test_check_command_exit_codes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     simulated = tmp_path / "sim.toml"
-    simulated.write_text(EXAMPLE.read_text() + "\n[keyfob]\nbackend = 'sim'\n[voice]\nbackend = 'sim'\n")
+    # The example robot (Kaspar 3's servos) simulated throughout.
+    robot = EXAMPLE.read_text().replace('backend = "real"', 'backend = "sim"', 1)
+    simulated.write_text(robot + "\n[keyfob]\nbackend = 'sim'\n[voice]\nbackend = 'sim'\n")
     assert main(["check", "--config", str(simulated)]) == 0
     table = capsys.readouterr().out
     assert f"configuration  ok    {simulated} (2 planned sessions)" in table

@@ -20,6 +20,7 @@ from typing import Any, TextIO
 from hal.clock import MonotonicClock
 from hal.errors import HalError
 from hal.servos.sim import SimServos
+from kasparctl.commands.arguments import number
 from kasparctl.commands.bringup import (
     BringUpError,
     Ending,
@@ -70,7 +71,7 @@ def register(subparsers: Any) -> None:
     which.add_argument("--group", help="the group to pose (default: every joint)")
     which.add_argument("--joints", type=lambda t: [n for n in t.split(",") if n],
                        help="joints to pose, e.g. smile,mouth_open")
-    record.add_argument("--seconds", type=float, default=None,
+    record.add_argument("--seconds", type=number(0, 3600, low_open=True, unit="s"), default=None,
                         help="save after N seconds instead of waiting for a press (scripts)")
     record.add_argument("--quiet", action="store_true", help="print the prompts, do not speak")
     record.add_argument(
@@ -82,8 +83,10 @@ def register(subparsers: Any) -> None:
     play = actions.add_parser("play", help="move to a recorded pose, within every limit")
     play.add_argument("name")
     common(play)
-    play.add_argument("--speed", type=float, default=None, help="deg/s, at most each limit")
-    play.add_argument("--duration", type=float, default=None, help="seconds, at least")
+    play.add_argument("--speed", type=number(0, 720, low_open=True, unit="deg/s"), default=None,
+                      help="deg/s, at most each limit")
+    play.add_argument("--duration", type=number(0, 600, unit="s"), default=None,
+                      help="seconds, at least")
     play.set_defaults(run=run_play)
 
     listing = actions.add_parser("list", help="the recorded poses and what the game uses them for")

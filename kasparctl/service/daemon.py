@@ -45,7 +45,7 @@ from hal import Hardware
 from hal.build import build
 from hal.clock import LoopClock
 from hal.errors import HalError
-from kasparctl.config import Config, SessionPlan, load_config
+from kasparctl.config import Config, ConfigError, SessionPlan, load_config, servo_backend_given
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.machine import Game, HardwareFault
@@ -141,7 +141,21 @@ class Daemon:
         self._say_abandoned = False
 
     def _load(self) -> Config:
-        config = load_config(self.options.config_path)
+        """The configuration, as a robot the game is played on; ConfigError otherwise.
+
+        On the robot (without --sim) it must say which servos it drives: without a
+        [servos] table they would be simulated without a word.
+        """
+        path = self.options.config_path
+        config = load_config(path, playable=True)
+        if not self.options.sim and not servo_backend_given(path):
+            raise ConfigError(
+                path,
+                "servos.backend",
+                "no [servos] table with its backend: on the robot the servos would be "
+                "simulated without a word; say backend = 'real' with the robot's buses and "
+                "joints (systemd/kaspar-3.toml), or backend = 'sim', or run `kasparctl run --sim`",
+            )
         if self.options.state_dir is not None:
             config = msgspec.structs.replace(config, state_dir=self.options.state_dir)
         return config
