@@ -138,6 +138,10 @@ class _ToStructlog(logging.Handler):
             message = record.getMessage()
         except (TypeError, ValueError):  # a record whose arguments do not fit its format
             message = str(record.msg)
+        if record.name.startswith("transitions") and message.endswith("CancelledError()"):
+            # A game ended (the daemon reading its sessions again, a demo whose reader went
+            # away) while a trigger ran: how it is ended, not an error.
+            method = "debug"
         logger = structlog.get_logger(record.name)
         getattr(logger, method)(message, logger=record.name, exc_info=record.exc_info or None)
 

@@ -17,7 +17,7 @@ import secrets
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO, cast
 
 from kasparctl.commands.arguments import PROBABILITY, UsageError, number, seed, stdin_readable
 from kasparctl.config import Config, ConfigError, load_config
@@ -31,6 +31,7 @@ from kasparctl.sim.demo import (
     DemoResult,
     DemoStalled,
     DemoStorageFailed,
+    Transcript,
     demo_config,
     run_demo,
     with_variant,
@@ -108,7 +109,12 @@ def run(arguments: argparse.Namespace) -> int:
     seed = arguments.seed if arguments.seed is not None else secrets.randbelow(2**31)
     state_dir = Path(arguments.state_dir or tempfile.mkdtemp(prefix="kaspar-demo-"))
     options = DemoOptions(
-        state_dir=state_dir, seed=seed, teacher=teacher, interactive=arguments.interactive
+        state_dir=state_dir,
+        seed=seed,
+        teacher=teacher,
+        interactive=arguments.interactive,
+        # A reader that goes away (`| head`) ends the demo, quietly (exit 0).
+        out=cast(TextIO, Transcript(sys.stdout)),
     )
     lock = StateDirLock(state_dir)
     try:
@@ -117,7 +123,8 @@ def run(arguments: argparse.Namespace) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 1
     except OSError as error:
-        print(f"error: {state_dir}: cannot use the state directory: {error}", file=sys.stderr)
+        reason = error.strerror or str(error)
+        print(f"error: {state_dir}: cannot use the state directory: {reason}", file=sys.stderr)
         return 1
     try:
         if view:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import errno
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -70,6 +71,35 @@ def demo_config() -> Config:
     return parse_config(text, "kasparctl/sim/demo.toml")
 
 
+class Transcript:
+    """The demo's printed lines; a reader that went away (`kasparctl demo | head`) ends the
+    demo quietly rather than fault every line Kaspar says into a closed pipe."""
+
+    def __init__(self, stream: TextIO) -> None:
+        """Print into `stream` until its reader goes away."""
+        self.stream = stream
+        self.gone = False
+        self.on_gone: Callable[[], None] | None = None
+
+    def write(self, text: str) -> int:
+        """Print `text`; once the reader is gone, nothing (and the demo is ended)."""
+        if not self.gone:
+            try:
+                self.stream.write(text)
+                self.stream.flush()
+            except BrokenPipeError:
+                self._went()
+        return len(text)
+
+    def flush(self) -> None:
+        """Nothing to flush: every write is flushed (a demo is read as it plays)."""
+
+    def _went(self) -> None:
+        self.gone = True
+        if self.on_gone is not None:
+            self.on_gone()
+
+
 @dataclass
 class DemoOptions:
     """Where a demo keeps its records, its seed, its children, and where it prints."""
@@ -118,6 +148,8 @@ class DemoRig(Generic[ServosT]):
     children: SimulatedGroup | None
     resumed: bool
     state_dir: Path
+    # The printed lines, when they may lose their reader (the command's stdout).
+    transcript: Transcript | None = None
     # Sessions found unfinished that could not be resumed, closed as abandoned.
     abandoned: list[Abandoned] = field(default_factory=list)
     # Why the records could not be saved, once they could not: the demo ends there.
@@ -142,8 +174,11 @@ class DemoRig(Generic[ServosT]):
                 storage.set()
 
         self.game.listeners.insert(0, on_storage_fault)
+        reader_gone = asyncio.Event()
+        if self.transcript is not None:
+            self.transcript.on_gone = reader_gone.set
         try:
-            final = await _play_until(self.game, storage)
+            final = await _play_until(self.game, storage, reader_gone)
         finally:
             if self.children is not None:
                 await self.children.close()
@@ -155,6 +190,10 @@ class DemoRig(Generic[ServosT]):
                 self.game.event_log.close()
             if self.game.session is not None:
                 self.game.session.close()
+        if reader_gone.is_set():
+            # Nobody reads the demo any more: as a closed pipe ends any command (exit 0);
+            # its session, if one opened, resumes at the next demo on this directory.
+            raise BrokenPipeError(errno.EPIPE, "the demo's reader went away")
         state, session = self.game.session_state, self.game.session
         if self.storage_failed is not None or state is None or session is None:
             raise DemoStorageFailed(
@@ -256,9 +295,10 @@ def assemble(
         )
         game.listeners.append(children)
     game.listeners.append(_narrator(narrate))
+    transcript = out if isinstance(out, Transcript) else None
     return DemoRig(
         game, servos, keyfob, voice, children, resumed is not None, options.state_dir,
-        outcome.abandoned,
+        transcript=transcript, abandoned=outcome.abandoned,
     )
 
 
@@ -267,14 +307,16 @@ async def play(config: Config, options: DemoOptions) -> DemoResult:
     return await build(config, options).run()
 
 
-async def _play_until(game: Game, storage: asyncio.Event) -> str:
-    """Play the game to its end, or end it once the records cannot be saved."""
+async def _play_until(game: Game, *stops: asyncio.Event) -> str:
+    """Play the game to its end, or end it at the first of `stops` (the records cannot be
+    saved; nobody reads the transcript any more)."""
     playing = asyncio.create_task(game.run(), name="demo game")
-    failed = asyncio.create_task(storage.wait())
+    stopping = {asyncio.create_task(stop.wait()) for stop in stops}
     try:
-        await asyncio.wait({playing, failed}, return_when=asyncio.FIRST_COMPLETED)
+        await asyncio.wait({playing, *stopping}, return_when=asyncio.FIRST_COMPLETED)
     finally:
-        failed.cancel()
+        for task in stopping:
+            task.cancel()
         # A cancellation inside a transitions trigger is swallowed: again until it ends.
         while not playing.done():
             playing.cancel()
