@@ -207,5 +207,5 @@ def test_learner_parameters_beyond_their_limits_are_refused(field: str, value: f
 
 
 def test_an_inline_config_parsed_from_text_holds_the_same_rules() -> None:
-    with pytest.raises(ConfigError, match="game.happy_pose.grin: not a configured joint"):
+    with pytest.raises(ConfigError, match=r"game\.happy_pose\.grin: not a configured joint"):
         parse_config(DEMO.replace(HAPPY, "happy_pose = { grin = 20.0 }"), "kaspar.toml")

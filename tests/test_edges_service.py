@@ -126,3 +126,34 @@ def test_the_demo_on_a_full_disk_ends_with_one_line_and_resumes_when_run_again(
         trials = trials_on_disk(state_dir)
     assert trials[: len(kept)] == kept
     assert trials == sorted(set(trials)) and trials[0] == 1
+
+
+def test_a_missing_servo_adapter_is_named_once_and_no_joint_is_said_to_the_children(
+    tmp_path: Path,
+) -> None:
+    """The service on a robot whose servo adapter is not plugged in: STATUS= and the records
+    name the bus and its device, the journal says it once, and Kaspar asks for a grown-up
+    without naming a joint (before: "Ouch, my head yaw is not working")."""
+    port = tmp_path / "kaspar-body"  # nothing there
+    robot = DEMO_CONFIG.read_text().replace('backend = "sim"\nsafe_action', 'backend = "real"\nsafe_action')
+    robot = robot.replace('port = "/dev/kaspar-body"', f'port = "{port}"')
+    config = tmp_path / "kaspar.toml"
+    config.write_text(robot + '\n[keyfob]\nbackend = "sim"\n\n[voice]\nbackend = "sim"\nrate = 450\n')
+    adapter = f"bus body: cannot open {port}: no such device"
+
+    def command(state_dir: Path) -> list[str]:
+        return run_command(state_dir, config=config, sim=False)
+
+    with running_service(tmp_path, command=command) as service:
+        service.notify.wait_for("READY=1")
+        status = service.notify.wait_for_status(lambda s: s.startswith("fault") and adapter in s)
+        assert "servo fault" in status
+        line = service.stderr.wait_for(lambda text: "Kaspar: " in text)
+        assert spoken(line, PHRASES["fault"]["problem"]), line
+        assert service.stop() == 0
+        said = [text for text in service.stderr.text().splitlines() if "Kaspar: " in text]
+    joints = ("head", "smile", "shoulder", "elbow", "yaw", "pitch", "joint")
+    assert not any(word in text.split("Kaspar: ", 1)[1].lower() for text in said for word in joints)
+    events = [json.loads(line) for line in (service.state_dir / "events.jsonl").read_text().splitlines()]
+    faults = [r for r in events if r["kind"] == "fault" and r["fault"] == "servo"]
+    assert faults and all(adapter in r["detail"] for r in faults)
