@@ -68,6 +68,10 @@ class SessionError(Exception):
     """A session directory that cannot be written or read back, with the path."""
 
 
+class RecordsLost(StateError):
+    """A session's records end before its snapshot does: records.jsonl emptied or cut."""
+
+
 class StorageFailed(SessionError):
     """A record, snapshot or session directory could not be written (the disk full, the
     state directory unwritable); the message names the file and the system's reason."""
@@ -474,7 +478,7 @@ class Session:
         included = snapshot.seq if snapshot else 0
         if included > self.last_seq:
             # Emptied or cut: resuming would number new records on after a hole.
-            raise StateError(
+            raise RecordsLost(
                 f"{self.directory / RECORDS_FILE}: records were lost: the log ends at record "
                 f"{self.last_seq}, but the snapshot {STATE_FILE} includes records up to {included}"
             )
@@ -749,10 +753,14 @@ def reopen(
             raise CannotResume(directory, damaged[0] + more)
         snapshot, later = session.load_state()
         state = restore(snapshot, later, game, params, seed)
-        _check_fits(state, game)
+        if changed := _how_it_changed(state, game):
+            raise CannotResume(directory, changed)
     except CannotResume:
         session.close()
         raise
+    except RecordsLost as error:
+        session.close()
+        raise CannotResume(directory, str(error)) from error
     except _REPLAY_ERRORS as error:
         session.close()
         raise CannotResume(directory, f"its records do not replay: {error}") from error
@@ -794,18 +802,20 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
-def _check_fits(state: GameState, game: GameSettings) -> None:
+def _how_it_changed(state: GameState, game: GameSettings) -> str | None:
+    """Why the state does not fit the game as configured now, or None when it does."""
     targets, labels = len(game.targets), len(game.toys)
     rows, columns = state.learner.table.shape
     if (rows, columns) != (targets, labels) or len(state.progress) != targets or len(
         state.offered
     ) != labels:
-        raise StateError(
+        return (
             f"the game has changed since the session began: it had {rows} targets and "
             f"{columns} toys, the configuration now has {targets} and {labels}"
         )
     if state.step not in STATES:
-        raise StateError(f"unknown step {state.step!r}")
+        return f"its state is at an unknown step {state.step!r}"
+    return None
 
 
 def abandon(directory: Path, reason: str, clock: float = 0.0) -> int:
