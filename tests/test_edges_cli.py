@@ -50,6 +50,7 @@ USAGE_ERRORS = {
         ["servos", "scan", "--port", "/dev/null", "--protocol", "herkulex", "--margin-ms", "1e9"],
         "argument --margin-ms: expected a number above 0 and up to 1000 ms, found 1e9",
     ),
+    "pose_name": (["pose", "record", "a b"], "argument name: expected letters, digits, _ and -, found 'a b'"),
     "pose_speed": (["pose", "play", "happy", "--speed", "-1"], "argument --speed: expected a number above 0 and up to 720 deg/s, found -1"),
     "reload_timeout": (["reload", "--pid", "1", "--timeout", "inf"], "argument --timeout: expected a number above 0 and up to 3600 s, found inf"),
     "keys_without_sim": (["run", "--keys", "/tmp/fifo"], "--keys: only with --sim (the real keyfob is configured in [keyfob])"),

@@ -65,7 +65,9 @@ def register(subparsers: Any) -> None:
         action.add_argument("--json", action="store_true", help="print the result as JSON")
 
     record = actions.add_parser("record", help="move joints by hand into a pose and save it")
-    record.add_argument("name", help="the pose: happy, sad, rest, a pilot location, ...")
+    record.add_argument(
+        "name", type=_pose_name, help="the pose: happy, sad, rest, a pilot location, ..."
+    )
     common(record)
     which = record.add_mutually_exclusive_group()
     which.add_argument("--group", help="the group to pose (default: every joint)")
@@ -92,6 +94,13 @@ def register(subparsers: Any) -> None:
     listing = actions.add_parser("list", help="the recorded poses and what the game uses them for")
     common(listing)
     listing.set_defaults(run=run_list)
+
+
+def _pose_name(text: str) -> str:
+    """A pose's name is a TOML key of the poses file: a usage error otherwise (exit 2)."""
+    if not BARE_KEY.match(text):
+        raise argparse.ArgumentTypeError(f"expected letters, digits, _ and -, found {text!r}")
+    return text
 
 
 def _config(arguments: argparse.Namespace) -> Config:
@@ -122,8 +131,6 @@ def run_record(arguments: argparse.Namespace) -> int:
     configure_logging("warning", "console", stream=sys.stderr)
     out = sys.stderr if arguments.json else sys.stdout
     try:
-        if not BARE_KEY.match(arguments.name):
-            raise BringUpError(f"pose name {arguments.name!r}: use letters, digits, _ and -")
         config = _config(arguments)
         saved = asyncio.run(record(config, arguments, out))
     except (ConfigError, BringUpError, HalError, TomlPatchError) as error:
