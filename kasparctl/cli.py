@@ -3,16 +3,25 @@
 Each subcommand lives in kasparctl/commands/<name>.py with a `register`
 function that adds its parser and sets `run`, a function of the parsed
 arguments returning the exit code.
+
+One contract for all of them (kasparctl.commands.arguments): a usage error exits 2
+with argparse's message; a failure exits 1 with one line naming its cause, never a
+traceback unless asked for (--debug, or KASPAR_DEBUG=1); a closed pipe exits 0.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+import traceback
 from collections.abc import Sequence
 
 from kasparctl import __version__
+from kasparctl.commands.arguments import UsageError, describe
+
+DEBUG_ENV = "KASPAR_DEBUG"
 
 COMMAND_MODULES = (
     "check",
@@ -39,6 +48,11 @@ def build_parser() -> argparse.ArgumentParser:
         prog="kasparctl", description="Controller of the Kaspar robot and its teaching game."
     )
     parser.add_argument("--version", action="version", version=f"kasparctl {__version__}")
+    parser.add_argument(
+        "--debug",
+        action="store_true",
+        help=f"show the traceback of a failure (also with {DEBUG_ENV}=1)",
+    )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(f"kasparctl.commands.{name}").register(subparsers)
@@ -46,13 +60,36 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run one subcommand and return its exit code (130 after Ctrl-C)."""
-    arguments = build_parser().parse_args(argv)
+    """Run one subcommand and return its exit code: 0, 1 on a failure (one line), 2 on a
+    usage error, 130 after Ctrl-C; 0 when the reader of its output went away."""
+    arguments = build_parser().parse_args(argv)  # a usage error exits 2 here
+    debug = arguments.debug or os.environ.get(DEBUG_ENV, "") not in ("", "0")
     try:
         return int(arguments.run(arguments))
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:
-        # `kasparctl ... | head` closed the pipe; that is not an error of ours.
-        sys.stderr.close()
-        return 0
+        return _pipe_closed()
+    except UsageError as error:
+        print(f"kasparctl {arguments.command}: error: {error}", file=sys.stderr)
+        return 2
+    except Exception as error:
+        if debug:
+            traceback.print_exc()
+        try:
+            print(f"error: {describe(error)}", file=sys.stderr)
+        except BrokenPipeError:
+            return _pipe_closed()
+        return 1
+
+
+def _pipe_closed() -> int:
+    """`kasparctl ... | head` closed the pipe: not an error of ours; say nothing more."""
+    # Python would flush stdout again at exit, into the closed pipe, and complain.
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            os.dup2(devnull, stream.fileno())
+        except (OSError, ValueError, AttributeError):
+            continue
+    return 0

@@ -288,18 +288,33 @@ class Config(_Settings, frozen=True):
         return plan.group_size or self.game.children_per_group
 
 
-def load_config(path: str | Path, *, poses: bool = True) -> Config:
+def load_config(path: str | Path, *, poses: bool = True, playable: bool = False) -> Config:
     """Read and validate a configuration file; ConfigError says what is wrong and where.
 
     `poses=False` leaves the poses file unread (the bring-up commands that write it
-    read it themselves, pose by pose).
+    read it themselves, pose by pose). `playable` also holds the rules of a robot the
+    game is played on (check_playable): `check`, `run` and `demo` ask for them; the
+    bring-up tools read a robot still being put together.
     """
     path = Path(path)
     try:
         data = path.read_bytes()
     except OSError as error:
         raise ConfigError(str(path), "(file)", f"cannot read it: {error.strerror}") from error
-    return parse_config(data, str(path), base_dir=path.parent, poses=poses)
+    config = parse_config(data, str(path), base_dir=path.parent, poses=poses)
+    if playable:
+        check_playable(config, str(path))
+    return config
+
+
+def check_playable(config: Config, source: str) -> None:
+    """The rules of a robot the game is played on, beyond those of any configuration:
+    the arm that points in step 2 is a group of its joints. ConfigError otherwise."""
+
+    def fail(key: str, message: str) -> typing.NoReturn:
+        raise ConfigError(source, key, message)
+
+    _check_pointing_group(config, fail)
 
 
 def parse_config(
@@ -310,7 +325,7 @@ def parse_config(
     With `poses`, the poses file (if named) fills the game's poses and the rest
     positions; see apply_poses_file.
     """
-    text = data.decode("utf-8", errors="replace") if isinstance(data, bytes) else data
+    text = _utf8(data, source) if isinstance(data, bytes) else data
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
@@ -326,6 +341,37 @@ def parse_config(
     if poses and config.poses_file is not None:
         config = apply_poses_file(config, source)
     return config
+
+
+def _utf8(data: bytes, source: str) -> str:
+    """The file's text; a byte that is not UTF-8 is an error naming where it is, never
+    replaced (a name said aloud and kept in the records must be what the file says)."""
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        line = data.count(b"\n", 0, error.start) + 1
+        column = error.start - (data.rfind(b"\n", 0, error.start) + 1) + 1
+        byte = data[error.start : error.start + 1].hex()
+        raise ConfigError(
+            source,
+            "(file)",
+            f"expected UTF-8 text, found byte 0x{byte} at line {line}, column {column} "
+            f"(byte offset {error.start}): save the file as UTF-8",
+        ) from None
+
+
+def servo_backend_given(path: str | Path) -> bool:
+    """Whether the file says which servos it drives: a [servos] table with its `backend`.
+
+    Without one the servos default to simulated ones, which on the robot would be a
+    silent simulation: `kasparctl run` (without --sim) and `check` refuse it.
+    """
+    try:
+        raw = tomllib.loads(Path(path).read_bytes().decode("utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return False  # load_config says what is wrong with the file itself
+    servos = raw.get("servos")
+    return isinstance(servos, dict) and "backend" in servos
 
 
 def _resolve_paths(config: Config, base_dir: Path) -> Config:
@@ -354,7 +400,7 @@ def read_poses(path: str | Path) -> dict[str, dict[str, float]]:
     """
     source = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = _utf8(Path(path).read_bytes(), source)
     except OSError as error:
         raise ConfigError(source, "(file)", f"cannot read it: {error.strerror}") from error
     try:
@@ -648,6 +694,7 @@ def _validate(config: Config, source: str) -> None:
     _check_learner(config.learner, fail)
     _check_game(config.game, fail)
     _check_game_controls(config.game, fail)
+    _check_game_servos(config, fail)
     _check_sessions(config, fail)
 
 
@@ -666,7 +713,40 @@ def _check_profile_name(learner: LearnerSettings, name: str, key: str, fail: _Fa
         fail(key, f"expected one of {', '.join(sorted(profiles))}, found {name!r}")
 
 
+# What a spoken line and a file name can hold: a toy, a location or a child's name is
+# said aloud in a sentence; a group code names the session's directory.
+NAME_LIMIT = 40
+GROUP_CODE_LIMIT = 64
+# numpy seeds its generator from a number >= 0; plan.json keeps it as a 64-bit integer.
+SEED_LIMIT = 2**63 - 1
+MAX_TRIALS_LIMIT = 1000
+
+
+def _check_words(names: tuple[str, ...], key: str, limit: int, fail: _Fail) -> None:
+    for index, name in enumerate(names):
+        _check_word(name, f"{key}[{index}]", limit, fail)
+
+
+def _check_word(name: str, key: str, limit: int, fail: _Fail) -> None:
+    """A name said aloud or used in a file name: printable, and short enough to say."""
+    if not name.isprintable():
+        fail(key, f"expected printable text, found {name!r} (a control character)")
+    if len(name) > limit:
+        fail(key, f"expected at most {limit} characters, found {len(name)}: {name[:24]!r}...")
+    if name != name.strip():
+        fail(key, f"expected no spaces at either end, found {name!r}")
+
+
 def _check_game(game: GameSettings, fail: _Fail) -> None:
+    _check_words(game.toys, "game.toys", NAME_LIMIT, fail)
+    _check_words(game.locations, "game.locations", NAME_LIMIT, fail)
+    if game.seed is not None and not 0 <= game.seed <= SEED_LIMIT:
+        fail("game.seed", f"expected 0 to {SEED_LIMIT}, found {game.seed}")
+    if not 1 <= game.max_trials_per_target <= MAX_TRIALS_LIMIT:
+        fail(
+            "game.max_trials_per_target",
+            f"expected 1 to {MAX_TRIALS_LIMIT}, found {game.max_trials_per_target}",
+        )
     _check_distinct(game.toys, "game.toys", fail)
     if game.variant == "pilot":
         if not game.locations:
@@ -685,6 +765,33 @@ def _check_game(game: GameSettings, fail: _Fail) -> None:
         )
 
 
+def _check_game_servos(config: Config, fail: _Fail) -> None:
+    """Every pose the game holds names configured joints, with finite degrees within
+    their safe ranges (the poses file's are checked as it is read)."""
+    game, servos = config.game, config.servos
+    poses = {"game.happy_pose": game.happy_pose, "game.sad_pose": game.sad_pose}
+    poses.update({f"game.poses.{name}": pose for name, pose in game.poses.items()})
+    for key, pose in poses.items():
+        for joint, degrees in pose.items():
+            if not math.isfinite(degrees):
+                fail(f"{key}.{joint}", f"expected a finite number of degrees, found {degrees}")
+        try:
+            check_pose(pose, key.removeprefix("game."), servos, "")
+        except ConfigError as error:
+            fail(f"game.{error.key}", error.message)
+
+
+def _check_pointing_group(config: Config, fail: _Fail) -> None:
+    game, groups = config.game, config.servos.groups
+    if game.variant == "names" and game.pointing_group not in groups:
+        known = ", ".join(groups) or "none: no joints are configured in [servos]"
+        fail(
+            "game.pointing_group",
+            f"expected a group of the configured joints ({known}), found "
+            f"{game.pointing_group!r}: step 2 teaches with it",
+        )
+
+
 def _check_sessions(config: Config, fail: _Fail) -> None:
     seen_groups: set[str] = set()
     for index, plan in enumerate(config.sessions):
@@ -697,6 +804,8 @@ def _check_sessions(config: Config, fail: _Fail) -> None:
 
 def _check_plan(plan: SessionPlan, where: str, config: Config, fail: _Fail) -> None:
     _check_profile_name(config.learner, plan.profile, f"{where}.profile", fail)
+    _check_word(plan.group, f"{where}.group", GROUP_CODE_LIMIT, fail)
+    _check_words(plan.children, f"{where}.children", NAME_LIMIT, fail)
     _check_distinct(plan.children, f"{where}.children", fail)
     if plan.children and plan.group_size not in (None, len(plan.children)):
         fail(

@@ -61,6 +61,18 @@ def connected_to_journal(stream: TextIO, environ: dict[str, str] | None = None) 
     return (status.st_dev, status.st_ino) == (int(device), int(inode))
 
 
+def wants_colour(stream: TextIO, environ: dict[str, str] | None = None) -> bool:
+    """Colour only on a terminal that can show it and a person who did not ask for none:
+    NO_COLOR set (to anything, https://no-color.org) or TERM=dumb turn it off."""
+    environ = environ if environ is not None else dict(os.environ)
+    if "NO_COLOR" in environ or environ.get("TERM") == "dumb":
+        return False
+    try:
+        return stream.isatty()
+    except (ValueError, AttributeError):
+        return False
+
+
 class JournalPriority:
     """Wraps a renderer: each rendered line starts with its level's "<N>" syslog prefix."""
 
@@ -93,7 +105,7 @@ def configure_logging(
     renderer: structlog.typing.Processor = (
         structlog.processors.JSONRenderer()
         if use_json
-        else structlog.dev.ConsoleRenderer(colors=stream.isatty())
+        else structlog.dev.ConsoleRenderer(colors=wants_colour(stream))
     )
     prefixed = connected_to_journal(stream) if journal is None else journal
     if prefixed and use_json:
@@ -126,6 +138,10 @@ class _ToStructlog(logging.Handler):
             message = record.getMessage()
         except (TypeError, ValueError):  # a record whose arguments do not fit its format
             message = str(record.msg)
+        if record.name.startswith("transitions") and message.endswith("CancelledError()"):
+            # A game ended (the daemon reading its sessions again, a demo whose reader went
+            # away) while a trigger ran: how it is ended, not an error.
+            method = "debug"
         logger = structlog.get_logger(record.name)
         getattr(logger, method)(message, logger=record.name, exc_info=record.exc_info or None)
 

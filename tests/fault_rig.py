@@ -77,14 +77,19 @@ DEADLINE_S = 600.0  # simulated seconds: bounds a failure only
 RECHECK_S = 0.5  # simulated seconds between looks at what no event announces
 
 
-def write_config(directory: Path, variant: str = "names") -> Path:
-    """The demo robot with one child per group (six bags to teach), names or pilot."""
+def write_config(
+    directory: Path, variant: str = "names", edit: Callable[[str], str] | None = None
+) -> Path:
+    """The demo robot with one child per group (six bags to teach), names or pilot;
+    `edit` changes its text (a profile removed between two runs)."""
     text = DEMO_TOML.replace("children_per_group = 3", "children_per_group = 1")
     answers = TOYS if variant == "names" else TOYS[:3]
     key = "answer_key = [" + ", ".join(f'"{toy}"' for toy in answers) + "]"
     text = text.replace('group = "demo"', f'group = "demo"\n{key}')
     if variant == "pilot":
         text = text.replace('variant = "names"\n', PILOT.lstrip("\n"))
+    if edit is not None:
+        text = edit(text)
     path = directory / f"kaspar-{variant}.toml"
     path.write_text(text, encoding="utf-8")
     load_config(str(path))  # a broken test config fails here, by name
@@ -291,9 +296,10 @@ def run_daemon(
     monkeypatch: pytest.MonkeyPatch,
     scenario: Callable[[FaultRig], Awaitable[None]],
     variant: str = "names",
+    edit: Callable[[str], str] | None = None,
 ) -> FaultRig:
     """The daemon on the rig in simulated time, `scenario` beside it; stopped after it."""
-    config_path = write_config(tmp_path, variant)
+    config_path = write_config(tmp_path, variant, edit)
     state_dir = tmp_path / "state"
     log = io.StringIO()
     configure_logging("debug", "json", stream=log)

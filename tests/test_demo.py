@@ -50,8 +50,10 @@ def test_default_state_dir_is_new_and_named(capsys) -> None:
 
 
 def test_bad_options_are_named(capsys, tmp_path: Path) -> None:
-    assert main(["demo", "--speed", "0"]) == 1
-    assert "--speed: expected a number > 0, found 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:
+        main(["demo", "--speed", "0"])
+    assert usage.value.code == 2  # a usage error, as argparse's own
+    assert "argument --speed: expected a number from 0.001 to 1e+06, found 0" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"
     bad.write_text("[game]\nvariant = 'maze'\n")
     assert main(["demo", "--config", str(bad)]) == 1

@@ -40,7 +40,7 @@ FUZZ = settings(
 
 # A key path as ConfigError writes it: "game.toys", "sessions[1].group",
 # "learner.profiles.quick.alpha", or one of the markers.
-_KEY = re.compile(r"kaspar\.toml: (\(syntax\)|\(top level\)|[\w\-\[\].]+): \S")
+_KEY = re.compile(r"kaspar\.toml: (\(syntax\)|\(file\)|\(top level\)|[\w\-\[\].]+): \S")
 
 # -- mutations of a TOML text --------------------------------------------------------
 

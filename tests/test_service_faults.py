@@ -199,10 +199,10 @@ def test_an_unusable_sessions_directory_is_a_storage_fault_the_researcher_resume
         mark = service.notify.mark()
         service.press("G")
         status = service.notify.wait_for_status(
-            lambda t: t.startswith("fault") and "records cannot be saved" in t, since=mark
+            lambda t: t.startswith("fault") and "CANNOT SAVE the records" in t, since=mark
         )
         assert "sessions: cannot create the state directory" in status, status
-        service.stderr.wait_for(lambda line: spoken(line, PHRASES["fault"]["problem"]))
+        service.stderr.wait_for(lambda line: spoken(line, PHRASES["fault"]["storage"]))
         assert service.process.poll() is None
         (state_dir / "sessions").unlink()  # the researcher clears the way
         mark = service.notify.mark()

@@ -64,6 +64,9 @@ def test_scan_rejects_nonsense_ids(capsys):
 def real_config(tmp_path, port) -> str:
     path = tmp_path / "kaspar.toml"
     path.write_text(f"""
+[game]
+pointing_group = "left_arm"
+
 [keyfob]
 backend = "sim"
 
@@ -155,6 +158,8 @@ def test_check_fails_on_an_impossible_reading_and_on_latched_error_bits(tmp_path
 def herkulex_config(tmp_path, port) -> str:
     path = tmp_path / "kaspar.toml"
     path.write_text(f"""
+[game]
+pointing_group = "body"
 [keyfob]
 backend = "sim"
 [voice]
@@ -226,7 +231,8 @@ def test_read_marks_an_impossible_position_and_exits_non_zero(tmp_path, capsys):
 
 def test_check_does_not_touch_servos_with_the_sim_backend(tmp_path, capsys):
     path = tmp_path / "kaspar.toml"
-    path.write_text("[servos]\nbackend = 'sim'\n[keyfob]\nbackend = 'sim'\n[voice]\nbackend = 'sim'\n")
+    path.write_text("[game]\nvariant = 'pilot'\nlocations = ['box']\n[servos]\nbackend = 'sim'\n"
+                    "[keyfob]\nbackend = 'sim'\n[voice]\nbackend = 'sim'\n")
     assert main(["check", "--config", str(path)]) == 0
     assert "servos answered" not in capsys.readouterr().out
 

@@ -181,7 +181,7 @@ def test_demo_view_without_a_terminal_prints_the_transcript(tmp_path: Path) -> N
         capture_output=True,
         text=True,
     )
-    assert result.returncode == 1 and "--view: needs real or --speed time" in result.stderr
+    assert result.returncode == 2 and "--view: needs real or --speed time" in result.stderr
     result = subprocess.run(
         [
             *KASPARCTL,

@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import enum
+import errno
 import os
 import queue
 import select
@@ -79,6 +80,26 @@ def open_port(path: str, baud: int) -> SerialPort:
     """
     port: SerialPort = serial.Serial(path, baud, timeout=0, write_timeout=1.0, exclusive=True)
     return port
+
+
+# What an adapter that cannot be opened most often means, in a person's words.
+_OPEN_FAILURES = {
+    errno.ENOENT: "no such device (the adapter unplugged, or its udev rule not installed)",
+    errno.ENODEV: "no such device (the adapter unplugged)",
+    errno.ENXIO: "no such device (the adapter unplugged)",
+    errno.EACCES: "permission denied (the service's user is not in the dialout group)",
+    errno.EBUSY: "in use by another process",
+}
+
+
+def open_failure(error: BaseException) -> str:
+    """Why a port could not be opened, in words; the system's own where it is unusual."""
+    number = getattr(error, "errno", None)
+    if isinstance(number, int) and number in _OPEN_FAILURES:
+        return _OPEN_FAILURES[number]
+    if isinstance(number, int):
+        return os.strerror(number)
+    return str(error)
 
 
 def wire_time(n_bytes: int, baud: int) -> float:
@@ -180,6 +201,9 @@ class SerialBus:
         self._next_open = 0.0
         self._repeats = RepeatFilter()
         self._log = log.bind(bus=self.name, port=self.port)
+        # Why the port last failed to open, in words (None once it is open): every
+        # message about the bus names the adapter and this, once, not each servo behind it.
+        self.open_error: str | None = None
 
     # --- event-loop side ----------------------------------------------------------------
 
@@ -192,6 +216,13 @@ class SerialBus:
     def connected(self) -> bool:
         """True while the port is open."""
         return self._state is BusState.CONNECTED
+
+    def unavailable(self) -> str:
+        """Why the bus cannot be used, naming the adapter: "bus body: cannot open
+        /dev/kaspar-body: no such device (...)", or that it is not open."""
+        if self.open_error is not None:
+            return f"bus {self.name}: cannot open {self.port}: {self.open_error}"
+        return f"bus {self.name}: {self.port} is not available"
 
     async def start(self) -> None:
         """Start the owner thread; it opens the port (now, or as soon as it appears)."""
@@ -346,8 +377,7 @@ class SerialBus:
                 if job is _STOP:
                     break
                 if self._serial is None:
-                    message = f"bus {self.name}: {self.port} is not available"
-                    job.resolve(error=PortUnavailable(message))
+                    job.resolve(error=PortUnavailable(self.unavailable()))
                     continue
                 self._execute(job)
         finally:
@@ -366,12 +396,14 @@ class SerialBus:
         try:
             port = open_port(self.port, self.baud)
         except (SerialException, OSError, ValueError) as error:
+            self.open_error = open_failure(error)
             if self._repeats.first("open", str(error)):
                 self._log.warning("serial port cannot be opened; retrying", error=str(error))
             self._next_open = time.monotonic() + self._backoff
             self._backoff = min(self._backoff * 2, self.backoff_max)
             return
         self._request_low_latency(port)
+        self.open_error = None
         repeated = self._repeats.end("open")
         if self.stats.disconnects:
             self.stats.reconnects += 1
@@ -410,7 +442,7 @@ class SerialBus:
         outcomes: list[Any] = []
         for exchange in job.exchanges:
             if self._serial is None:  # lost during this batch
-                outcomes.append(PortUnavailable(f"bus {self.name}: {self.port} is not available"))
+                outcomes.append(PortUnavailable(self.unavailable()))
                 continue
             try:
                 outcomes.append(self._attempt(exchange))

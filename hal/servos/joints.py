@@ -183,8 +183,7 @@ class Joints:
                     await self._latch(joint.name, FaultKind.SILENT, str(error), act=False)
                     continue
                 except PortUnavailable as error:
-                    for joint in members:
-                        await self._latch(joint.name, FaultKind.BUS_LOST, str(error), act=False)
+                    await self._bus_lost(members, error, act=False)
                     continue
                 impossible = self._take_readings(by_id, raw)
                 for joint, detail in impossible:
@@ -359,6 +358,17 @@ class Joints:
         self._faults.clear()
 
     # --- inspection (check, `servos read`) -----------------------------------------------
+
+    def unavailable_buses(self) -> dict[str, str]:
+        """Each bus whose adapter is not open now, and why, naming the adapter (the joints
+        behind it cannot answer: one message for them all). Simulated buses are always open."""
+        from hal.servos.drivers import BusDriver
+
+        return {
+            name: driver.bus.unavailable()
+            for name, driver in self._drivers.items()
+            if isinstance(driver, BusDriver) and not driver.bus.connected
+        }
 
     async def ping_all(self) -> dict[str, int | None]:
         """Every joint's servo model number (0 where the protocol has none), None if silent."""
@@ -656,18 +666,31 @@ class Joints:
                         joint.last_sent = joint.commanded
                     joint.commanded = None
 
-    async def _bus_lost(self, joints: list[_Joint], error: BaseException) -> None:
+    async def _bus_lost(self, joints: list[_Joint], error: BaseException, act: bool = True) -> None:
+        """Every joint behind an adapter that went away: one fault each, one log line for all
+        (it names the adapter, not each servo behind it)."""
+        new = [
+            j.name for j in joints
+            if not any(f.joint == j.name and f.kind is FaultKind.BUS_LOST for f in self._faults)
+        ]
+        if new:
+            log.error("servo bus lost: its joints' faults latched", detail=str(error),
+                      joints=new, safe_action=self.settings.safe_action)
         for joint in joints:
-            await self._latch(joint.name, FaultKind.BUS_LOST, str(error), act=False)
-        await self._safe_action(None)
+            await self._latch(joint.name, FaultKind.BUS_LOST, str(error), act=False, logged=True)
+        if act:
+            await self._safe_action(None)
 
-    async def _latch(self, joint: str, kind: FaultKind, detail: str, act: bool = True) -> None:
+    async def _latch(
+        self, joint: str, kind: FaultKind, detail: str, act: bool = True, logged: bool = False
+    ) -> None:
         if any(f.joint == joint and f.kind is kind for f in self._faults):
             return
         fault = Fault(joint, kind, detail, self.clock.now())
         self._faults.append(fault)
-        log.error("servo fault latched", joint=joint, kind=kind.value, detail=detail,
-                  safe_action=self.settings.safe_action)
+        if not logged:
+            log.error("servo fault latched", joint=joint, kind=kind.value, detail=detail,
+                      safe_action=self.settings.safe_action)
         for listener in self._fault_listeners:
             listener(fault)
         if act:

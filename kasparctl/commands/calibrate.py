@@ -22,6 +22,7 @@ from hal.clock import MonotonicClock
 from hal.errors import HalError
 from hal.servos.joints import Joints
 from hal.servos.sim import SimServos
+from kasparctl.commands.arguments import number
 from kasparctl.commands.bringup import (
     BringUpError,
     Ending,
@@ -54,18 +55,18 @@ def register(commands: Any) -> None:
     which.add_argument("--joints", type=_names, help="joints to calibrate, e.g. left_elbow,smile")
     which.add_argument("--group", help="a group to calibrate, e.g. left_arm (default: all joints)")
     parser.add_argument(
-        "--margin", type=float, default=DEFAULT_MARGIN_DEG,
+        "--margin", type=number(0, 45, unit="deg"), default=DEFAULT_MARGIN_DEG,
         help=f"degrees kept inside each end seen (default {DEFAULT_MARGIN_DEG})",
     )
     parser.add_argument(
-        "--seconds", type=float, default=None,
+        "--seconds", type=number(0, 3600, low_open=True, unit="s"), default=None,
         help="end after N seconds instead of waiting for a press or Enter (scripts)",
     )
     parser.add_argument("--write", action="store_true", help="write the proposal to --config")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--quiet", action="store_true", help="print the prompts, do not speak")
     parser.add_argument(
-        "--sim-sweep", type=float, default=None, metavar="DEG",
+        "--sim-sweep", type=number(0, 180, unit="deg"), default=None, metavar="DEG",
         help="simulated servos only: a hand sweeps each joint DEG beyond its configured range",
     )
     parser.set_defaults(run=run)

@@ -17,13 +17,25 @@ from typing import Any
 
 from hal.clock import MonotonicClock
 from hal.servos.api import JointStatus
+from hal.servos.bus import open_failure
 from hal.servos.joints import Joints
 from hal.servos.settings import ServoSettings
-from kasparctl.config import Config, ConfigError, default_config_path, load_config
+from kasparctl.config import (
+    Config,
+    ConfigError,
+    default_config_path,
+    load_config,
+    servo_backend_given,
+)
 from kasparctl.game.phrases import PhraseError, load_phrasebook
 from kasparctl.log import configure_logging
 
 TEST_LINE = "Hello, I am Kaspar. My voice is working."
+NO_BACKEND = (
+    "no [servos] table with its backend: the servos would be simulated without a word; "
+    "say backend = 'real' with the robot's buses and joints (systemd/kaspar-3.toml), "
+    "or backend = 'sim'"
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,15 +64,18 @@ def run(arguments: argparse.Namespace) -> int:
     """Check the configuration, phrases, servos, keyfob and voice; exit 1 if any fails."""
     path = arguments.config or default_config_path()
     try:
-        config = load_config(path)
+        config = load_config(path, playable=True)
         phrasebook = load_phrasebook(config.language, config.phrases_dir)
     except (ConfigError, PhraseError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
-    configure_logging("warning", "console", stream=sys.stderr)
+    # Errors only: the table says what is wrong, once per part (a bus's retries would
+    # repeat its adapter's row).
+    configure_logging("error", "console", stream=sys.stderr)
     results = [
         Result("configuration", True, f"{path} ({len(config.sessions)} planned sessions)"),
         Result("phrases", True, phrasebook.source),
+        *([] if servo_backend_given(path) else [Result("servos", False, NO_BACKEND)]),
         *asyncio.run(_hardware(config, speak=not arguments.quiet)),
     ]
     _print_table(results)
@@ -78,10 +93,16 @@ async def _servos(config: Config, speak: bool) -> list[Result]:
         return [Result("servos", True, "simulated (servos.backend = 'sim')")]
     if not config.servos.joints:
         return [Result("servos", False, "no joints configured in [servos]")]
-    found, statuses = await _inspect_servos(config.servos)
+    found, statuses, unavailable = await _inspect_servos(config.servos)
     results = []
     answered = 0
+    for bus_name, why in unavailable.items():
+        # One line per adapter, not one per servo behind it.
+        behind = [j.name for j in config.servos.joints if j.bus == bus_name]
+        results.append(Result("servos", False, f"{why}; its {len(behind)} joints not checked"))
     for joint in config.servos.joints:
+        if joint.bus in unavailable:
+            continue
         bus = config.servos.bus(joint.bus)
         where = f"bus {bus.name} on {bus.port}, id {joint.id}"
         model_number = found[joint.name]
@@ -109,17 +130,20 @@ async def _servos(config: Config, speak: bool) -> list[Result]:
     return results
 
 
-async def _inspect_servos(settings: ServoSettings) -> tuple[dict[str, int | None], dict[str, Any]]:
+async def _inspect_servos(
+    settings: ServoSettings,
+) -> tuple[dict[str, int | None], dict[str, Any], dict[str, str]]:
     joints = Joints.from_settings(settings, MonotonicClock())
     # Pings and reads only: nothing moves. (A HerkuleX bus gets its ACK policy set, and
     # packet error bits are cleared once reported.)
     await joints.start(poll=False, read=False)
     try:
+        unavailable = joints.unavailable_buses()
         found = await joints.ping_all()
         statuses = {s.joint: s for s in await joints.survey()}
     finally:
         await joints.close()
-    return found, statuses
+    return found, statuses, unavailable
 
 
 def _servo_row(status: JointStatus) -> Result:
@@ -152,6 +176,10 @@ async def _keyfob(config: Config, speak: bool) -> list[Result]:
     try:
         found = Keyfob(config.keyfob, MonotonicClock()).probe()
     except (HalError, OSError) as error:
+        cause = error if isinstance(error, OSError) else error.__cause__
+        if isinstance(cause, OSError) and cause.filename:
+            found = f"cannot open {cause.filename}: {open_failure(cause)}"
+            return [Result("keyfob", False, found)]
         return [Result("keyfob", False, f"not found: {error}")]
     return [Result("keyfob", True, found)]
 

@@ -17,8 +17,9 @@ import secrets
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO, cast
 
+from kasparctl.commands.arguments import PROBABILITY, UsageError, number, seed, stdin_readable
 from kasparctl.config import Config, ConfigError, load_config
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.phrases import PhraseError
@@ -29,11 +30,17 @@ from kasparctl.sim.demo import (
     DemoOptions,
     DemoResult,
     DemoStalled,
+    DemoStorageFailed,
+    Transcript,
     demo_config,
     run_demo,
     with_variant,
 )
 from kasparctl.sim.teacher import DEFAULT_THINK_S, Teacher, TeacherError, load_teacher
+
+# Slower than real time down to a thousandth; faster up to a million times (beyond, the
+# clock's steps are below what the loop can time: use --fast).
+SPEED = number(0.001, 1e6)
 
 
 def register(subparsers: Any) -> None:
@@ -42,9 +49,11 @@ def register(subparsers: Any) -> None:
         "demo", help="watch a simulated group of children teach Kaspar", description=__doc__
     )
     timing = parser.add_mutually_exclusive_group()
-    timing.add_argument("--speed", type=float, default=None, help="run the clock F times faster")
+    timing.add_argument(
+        "--speed", type=SPEED, default=None, help="run the clock F times faster (0.001 to 1e6)"
+    )
     timing.add_argument("--fast", action="store_true", help="simulated time, as fast as possible")
-    parser.add_argument("--seed", type=int, default=None, help="reproduce a game exactly")
+    parser.add_argument("--seed", type=seed, default=None, help="reproduce a game exactly")
     parser.add_argument(
         "--interactive", action="store_true", help="you are the children: keys on the terminal"
     )
@@ -53,9 +62,9 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--config", default=None, help="kaspar.toml (default: the demo robot)")
     parser.add_argument("--variant", choices=("names", "pilot"), default=None)
-    parser.add_argument("--p-wrong-green", type=float, default=0.0)
-    parser.add_argument("--p-wrong-red", type=float, default=0.0)
-    parser.add_argument("--p-no-answer", type=float, default=0.0)
+    parser.add_argument("--p-wrong-green", type=PROBABILITY, default=0.0)
+    parser.add_argument("--p-wrong-red", type=PROBABILITY, default=0.0)
+    parser.add_argument("--p-no-answer", type=PROBABILITY, default=0.0)
     parser.add_argument(
         "--teacher",
         default=None,
@@ -78,17 +87,19 @@ def run(arguments: argparse.Namespace) -> int:
     """Play the whole game on the simulated robot with simulated children."""
     if arguments.interactive and arguments.fast:
         # Simulated time would rush through every prompt before a person could type.
-        print("error: --interactive: needs real or --speed time, not --fast", file=sys.stderr)
-        return 1
+        raise UsageError("--interactive: needs real or --speed time, not --fast")
     if arguments.view and (arguments.interactive or arguments.fast):
         # The view has the terminal; in simulated time it would only show the end.
-        print("error: --view: needs real or --speed time, without --interactive", file=sys.stderr)
-        return 1
-    if arguments.speed is not None and not arguments.speed > 0:
-        print(f"error: --speed: expected a number > 0, found {arguments.speed}", file=sys.stderr)
+        raise UsageError("--view: needs real or --speed time, without --interactive")
+    if arguments.interactive and not stdin_readable():
+        print(
+            "error: --interactive: standard input is closed, and the children's keys are read "
+            "from it: run the demo from a terminal",
+            file=sys.stderr,
+        )
         return 1
     try:
-        config = load_config(arguments.config) if arguments.config else demo_config()
+        config = load_config(arguments.config, playable=True) if arguments.config else demo_config()
         if arguments.variant and arguments.variant != config.game.variant:
             config = with_variant(config, arguments.variant)
         teacher = Teacher(arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)
@@ -118,6 +129,8 @@ def run(arguments: argparse.Namespace) -> int:
         teacher=teacher,
         think_s=think_s,
         interactive=arguments.interactive,
+        # A reader that goes away (`| head`) ends the demo, quietly (exit 0).
+        out=cast(TextIO, Transcript(sys.stdout)),
     )
     lock = StateDirLock(state_dir)
     try:
@@ -126,14 +139,15 @@ def run(arguments: argparse.Namespace) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 1
     except OSError as error:
-        print(f"error: {state_dir}: cannot use the state directory: {error}", file=sys.stderr)
+        reason = error.strerror or str(error)
+        print(f"error: {state_dir}: cannot use the state directory: {reason}", file=sys.stderr)
         return 1
     try:
         if view:
             result = _with_view(config, options, arguments.speed)
         else:
             result = run_demo(config, options, speed=arguments.speed, fast=arguments.fast)
-    except (PhraseError, SessionError, ConfigError, DemoStalled) as error:
+    except (PhraseError, SessionError, ConfigError, DemoStalled, DemoStorageFailed) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
     finally:

@@ -20,6 +20,7 @@ from typing import Any, TextIO
 from hal.clock import MonotonicClock
 from hal.errors import HalError
 from hal.servos.sim import SimServos
+from kasparctl.commands.arguments import number
 from kasparctl.commands.bringup import (
     BringUpError,
     Ending,
@@ -64,13 +65,15 @@ def register(subparsers: Any) -> None:
         action.add_argument("--json", action="store_true", help="print the result as JSON")
 
     record = actions.add_parser("record", help="move joints by hand into a pose and save it")
-    record.add_argument("name", help="the pose: happy, sad, rest, a pilot location, ...")
+    record.add_argument(
+        "name", type=_pose_name, help="the pose: happy, sad, rest, a pilot location, ..."
+    )
     common(record)
     which = record.add_mutually_exclusive_group()
     which.add_argument("--group", help="the group to pose (default: every joint)")
     which.add_argument("--joints", type=lambda t: [n for n in t.split(",") if n],
                        help="joints to pose, e.g. smile,mouth_open")
-    record.add_argument("--seconds", type=float, default=None,
+    record.add_argument("--seconds", type=number(0, 3600, low_open=True, unit="s"), default=None,
                         help="save after N seconds instead of waiting for a press (scripts)")
     record.add_argument("--quiet", action="store_true", help="print the prompts, do not speak")
     record.add_argument(
@@ -82,13 +85,22 @@ def register(subparsers: Any) -> None:
     play = actions.add_parser("play", help="move to a recorded pose, within every limit")
     play.add_argument("name")
     common(play)
-    play.add_argument("--speed", type=float, default=None, help="deg/s, at most each limit")
-    play.add_argument("--duration", type=float, default=None, help="seconds, at least")
+    play.add_argument("--speed", type=number(0, 720, low_open=True, unit="deg/s"), default=None,
+                      help="deg/s, at most each limit")
+    play.add_argument("--duration", type=number(0, 600, unit="s"), default=None,
+                      help="seconds, at least")
     play.set_defaults(run=run_play)
 
     listing = actions.add_parser("list", help="the recorded poses and what the game uses them for")
     common(listing)
     listing.set_defaults(run=run_list)
+
+
+def _pose_name(text: str) -> str:
+    """A pose's name is a TOML key of the poses file: a usage error otherwise (exit 2)."""
+    if not BARE_KEY.match(text):
+        raise argparse.ArgumentTypeError(f"expected letters, digits, _ and -, found {text!r}")
+    return text
 
 
 def _config(arguments: argparse.Namespace) -> Config:
@@ -119,8 +131,6 @@ def run_record(arguments: argparse.Namespace) -> int:
     configure_logging("warning", "console", stream=sys.stderr)
     out = sys.stderr if arguments.json else sys.stdout
     try:
-        if not BARE_KEY.match(arguments.name):
-            raise BringUpError(f"pose name {arguments.name!r}: use letters, digits, _ and -")
         config = _config(arguments)
         saved = asyncio.run(record(config, arguments, out))
     except (ConfigError, BringUpError, HalError, TomlPatchError) as error:

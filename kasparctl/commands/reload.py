@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from kasparctl.commands.arguments import UsageError, number, whole
 from kasparctl.log import PRIORITIES, connected_to_journal
 from kasparctl.service.reload import request_reload, runtime_directory
 
@@ -24,7 +25,8 @@ def register(subparsers: Any) -> None:
         description=__doc__,
     )
     parser.add_argument(
-        "--pid", type=int, default=None, help="the service's process (default: $MAINPID)"
+        "--pid", type=whole(1, 2**22), default=None,
+        help="the service's process (default: $MAINPID)",
     )
     parser.add_argument(
         "--runtime-dir",
@@ -32,7 +34,8 @@ def register(subparsers: Any) -> None:
         help="where the service answers (default: $RUNTIME_DIRECTORY, as systemd sets it)",
     )
     parser.add_argument(
-        "--timeout", type=float, default=10.0, help="seconds to wait for the answer (10)"
+        "--timeout", type=number(0, 3600, low_open=True, unit="s"), default=10.0,
+        help="seconds to wait for the answer (10)",
     )
     parser.set_defaults(run=run)
 
@@ -44,10 +47,11 @@ def run(arguments: argparse.Namespace) -> int:
         Path(arguments.runtime_dir) if arguments.runtime_dir else runtime_directory()
     )
     if pid is None or pid <= 0:
-        return _say(3, "error: --pid: expected the service's process id, or $MAINPID set")
+        raise UsageError("--pid: expected the service's process id, or $MAINPID set")
     if directory is None:
-        return _say(3, "error: --runtime-dir: expected the service's runtime directory, "
-                       "or $RUNTIME_DIRECTORY set")  # fmt: skip
+        raise UsageError(
+            "--runtime-dir: expected the service's runtime directory, or $RUNTIME_DIRECTORY set"
+        )
     try:
         verdict = request_reload(pid, directory, arguments.timeout)
     except OSError as error:

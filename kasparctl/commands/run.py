@@ -6,6 +6,7 @@ import argparse
 import sys
 from typing import Any
 
+from kasparctl.commands.arguments import UsageError, stdin_readable
 from kasparctl.config import ConfigError, default_config_path
 from kasparctl.game.lock import StateDirBusy
 from kasparctl.game.phrases import PhraseError
@@ -38,8 +39,13 @@ def run(arguments: argparse.Namespace) -> int:
     """Run the daemon until it is stopped; 1 when the configuration or phrases are unusable,
     or when another process already writes to the state directory."""
     if arguments.keys is not None and not arguments.sim:
-        print("error: --keys: only with --sim (the real keyfob is configured in [keyfob])",
-              file=sys.stderr)  # fmt: skip
+        raise UsageError("--keys: only with --sim (the real keyfob is configured in [keyfob])")
+    if arguments.sim and arguments.keys is None and not stdin_readable():
+        print(
+            "error: --sim: standard input is closed, and the simulated keyfob reads the keys "
+            "from it: give --keys FIFO, or run it from a terminal",
+            file=sys.stderr,
+        )
         return 1
     options = DaemonOptions(
         config_path=arguments.config or default_config_path(),

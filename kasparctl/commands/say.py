@@ -64,6 +64,14 @@ def run(arguments: argparse.Namespace) -> int:
     except ConfigError as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
+    if arguments.wav:
+        folder = Path(arguments.wav).resolve().parent
+        if not folder.is_dir():
+            print(f"error: --wav {arguments.wav}: no such directory: {folder}", file=sys.stderr)
+            return 1
+        if not os.access(folder, os.W_OK):
+            print(f"error: --wav {arguments.wav}: {folder}: permission denied", file=sys.stderr)
+            return 1
     spoken = asyncio.run(speak(settings, arguments.text, arguments.key, arguments.wav))
     if not spoken.finished:
         print(f"error: not spoken ({spoken.status.value}): {spoken.error}", file=sys.stderr)

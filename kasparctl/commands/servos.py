@@ -16,6 +16,7 @@ from hal.servos.drivers import DRIVERS
 from hal.servos.joints import Joints
 from hal.servos.settings import BAUD_RATES, JointSettings, model_named
 from hal.servos.sim import SimServos
+from kasparctl.commands.arguments import number
 from kasparctl.config import ConfigError, load_config
 from kasparctl.log import configure_logging
 
@@ -41,7 +42,7 @@ def register(subparsers: Any) -> None:
     )
     scan.add_argument(
         "--margin-ms",
-        type=float,
+        type=number(0, 1000, low_open=True, unit="ms"),  # as a bus's timeout_margin_ms
         default=20.0,
         help="reply time allowed beyond the wire time (default 20)",
     )
@@ -88,7 +89,7 @@ async def scan(
     found = []
     try:
         if not bus.connected:
-            raise BusError(f"cannot open {port}")
+            raise BusError(bus.unavailable())
         for servo_id in ids:
             model_number = await driver.ping(servo_id)
             if model_number is None:

@@ -176,6 +176,7 @@ class Game:
         event_log: EventLog | None = None,
         startup_faults: Sequence[HardwareFault] = (),
         known_problems: Mapping[FaultSource, str] | None = None,
+        unwritten: Sequence[tuple[Session | EventLog, Record, float]] = (),
     ) -> None:
         """A game that opens its session with `open_session` at the start, or resumes `resumed`.
 
@@ -185,7 +186,8 @@ class Game:
         `known_problems` are those an earlier game saw that are not over (the keyfob
         still away, the voice or the disk failing): shown from the start. The keyfob
         itself reports KeyfobLost when it is not there at its start; an earlier game
-        may have taken that report, hence these.
+        may have taken that report, hence these. `unwritten` are records an earlier
+        game kept when the disk refused them (its `unwritten`): written first, in order.
         """
         self.config = config
         self.settings = config.game
@@ -199,7 +201,7 @@ class Game:
         self.speech.failing = self.problems.get(FaultSource.VOICE)
         # The kinds of fault Kaspar has said since the game last stopped for one.
         self._said_in_fault: set[FaultSource] = set()
-        self._unwritten: list[tuple[Session | EventLog, Record, float]] = []
+        self._unwritten: list[tuple[Session | EventLog, Record, float]] = list(unwritten)
         self._storage_fault_queued = False
         self._storage_failed_in_event_log = False
         self._open_session = open_session
@@ -285,6 +287,11 @@ class Game:
             self.hw.servos.off_fault(self._fault_latched)
             await _cancelled(readers)
         return self.stage
+
+    @property
+    def unwritten(self) -> list[tuple[Session | EventLog, Record, float]]:
+        """The records the disk refused, still to write (for the next game to carry on)."""
+        return list(self._unwritten)
 
     def flush_unwritten(self) -> int:
         """Write the records the disk refused, in order, as far as it takes them now.
@@ -607,11 +614,11 @@ class Game:
         self._said_in_fault.add(fault.kind)
         # Said while the game goes on listening: the keyfob coming back, the researcher's
         # resume or stop are heard before the line ends.
-        if fault.kind is FaultSource.SERVO:
-            joint = (fault.joint or "a joint").replace("_", " ")
-            self.speech.announce_soon("fault.servo", joint=joint)
-        elif fault.kind is FaultSource.KEYFOB:
+        # The children hear no joint or device: STATUS= and the records name them.
+        if fault.kind is FaultSource.KEYFOB:
             self.speech.announce_soon("fault.keyfob_lost")
+        elif fault.kind is FaultSource.STORAGE:
+            self.speech.announce_soon("fault.storage")
         else:
             self.speech.announce_soon("fault.problem")
 

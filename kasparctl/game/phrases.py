@@ -66,6 +66,7 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
         "session.intro_pilot": _spec(),
         "session.resumed": _spec(),
         "session.farewell": _spec(),
+        "session.abandoned": _spec(),
         "steps.place_bags": _spec(),
         "steps.teach_pointing": _spec(),
         "steps.reveal_toys": _spec(),
@@ -97,6 +98,7 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
         "fault.keyfob_lost": _spec(),
         "fault.keyfob_back": _spec(),
         "fault.problem": _spec(),
+        "fault.storage": _spec(),
         "fault.cleared": _spec(),
         "uncertainty.no_idea": _spec(variety=_OFTEN),
     }

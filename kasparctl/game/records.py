@@ -31,6 +31,9 @@ class SessionEvent(enum.StrEnum):
     RESUMED = "resumed"
     # The daemon stopped mid-session: it is left unfinished, to be resumed at the next start.
     SHUTDOWN = "shutdown"
+    # An unfinished session that could not be resumed (its records damaged, its learner
+    # profile gone...): closed for good, with the reason; the next session starts anew.
+    ABANDONED = "abandoned"
 
 
 class HalEvent(enum.StrEnum):
@@ -86,7 +89,8 @@ class SessionRecord(Record, tag="session", kw_only=True, frozen=True):
     # resumed: the machine's state it resumed in, and the trials recorded before.
     step: str | UnsetType = UNSET
     trials: int | UnsetType = UNSET
-    # shutdown: why the daemon stopped, and the machine's state then.
+    # shutdown: why the daemon stopped, and the machine's state then; abandoned: why the
+    # session could not be resumed, and the step it had reached ("unknown" if unreadable).
     reason: str | UnsetType = UNSET
     state: str | UnsetType = UNSET
 

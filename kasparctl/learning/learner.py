@@ -25,6 +25,14 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
 
+# The largest reward or starting Q the learner takes: far beyond any study's, and small
+# enough that Q (bounded by max(|Q0|, |r| / (1 - gamma))) stays a finite number in every
+# record, never overflowing into inf or null.
+VALUE_LIMIT = 1e6
+# The largest inverse temperature: beyond it the softmax is a plain argmax anyway.
+BETA_LIMIT = 1e6
+
+
 class LearnerError(ValueError):
     """A learner parameter or a serialised learner state is unusable.
 
@@ -61,10 +69,19 @@ class LearnerParams:
                 raise LearnerError(f"expected a finite number, found {value!r}", name)
         if not 0.0 < self.alpha <= 1.0:
             raise LearnerError(f"expected a number in (0, 1], found {self.alpha!r}", "alpha")
-        if self.beta < 0.0:
-            raise LearnerError(f"expected a number >= 0, found {self.beta!r}", "beta")
+        if not 0.0 <= self.beta <= BETA_LIMIT:
+            raise LearnerError(
+                f"expected a number from 0 to {BETA_LIMIT:g}, found {self.beta!r}", "beta"
+            )
         if not 0.0 <= self.gamma < 1.0:
             raise LearnerError(f"expected a number in [0, 1), found {self.gamma!r}", "gamma")
+        for name in ("reward_green", "reward_red", "initial_q"):
+            value = getattr(self, name)
+            if abs(value) > VALUE_LIMIT:
+                raise LearnerError(
+                    f"expected a number from {-VALUE_LIMIT:g} to {VALUE_LIMIT:g}, found {value!r}",
+                    name,
+                )
 
     def reward(self, green: bool) -> float:
         """The reward r of Eq. 1 for a green (right) or red (wrong) press."""
@@ -150,10 +167,17 @@ def update(
     params: LearnerParams,
     next_state: int | None = None,
 ) -> FloatArray:
-    """Return a new table with Eq. 1 applied; `next_state` None means terminal."""
+    """Return a new table with Eq. 1 applied; `next_state` None means terminal.
+
+    LearnerError if the new value is not a finite number (a reward or table beyond
+    every limit): a record never holds inf, or null where JSON has no inf.
+    """
     next_max = 0.0 if next_state is None else float(table[next_state].max())
     result = table.copy()
-    result[state, action] = updated_value(float(table[state, action]), reward, params, next_max)
+    value = updated_value(float(table[state, action]), reward, params, next_max)
+    if not math.isfinite(value):
+        raise LearnerError(f"Q({state}, {action}) would be {value!r}: not a finite number")
+    result[state, action] = value
     return result
 
 

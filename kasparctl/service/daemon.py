@@ -45,22 +45,27 @@ from hal import Hardware
 from hal.build import build
 from hal.clock import LoopClock
 from hal.errors import HalError
-from kasparctl.config import Config, SessionPlan, load_config
+from kasparctl.config import Config, ConfigError, SessionPlan, load_config, servo_backend_given
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.machine import Game, HardwareFault
 from kasparctl.game.phrases import PhraseBook, PhrasePicker, load_phrasebook
-from kasparctl.game.records import FaultSource
+from kasparctl.game.records import FaultSource, Record, SessionEvent, SessionRecord
 from kasparctl.game.session import (
     PLAN_FILE,
+    UNDECODABLE,
+    Abandoned,
     EventLog,
+    Resumable,
     Session,
-    SessionError,
-    find_unfinished,
+    StorageFailed,
+    abandoned_reason,
+    frozen_learner,
     is_finished,
+    resume_or_abandon,
     session_dirs,
 )
-from kasparctl.game.state import GameState, StateError, restore
+from kasparctl.game.state import GameState
 from kasparctl.log import configure_logging
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
 from kasparctl.service.sdnotify import Notifier, watchdog_interval
@@ -68,12 +73,14 @@ from kasparctl.service.status import STATUS_WORDS, status_line
 
 log = structlog.get_logger("kasparctl.service.daemon")
 
-# What makes a state directory's sessions unreadable: a file, its JSON, its records.
-UNREADABLE = (SessionError, StateError, OSError, msgspec.MsgspecError, KeyError, TypeError)
 # The loop may blindly trust this much lateness of its own timer before it
 # counts as unresponsive (a busy but healthy loop on a small board).
 LOOP_LAG_LIMIT_S = 1.0
 REST_TIMEOUT_S = 15.0
+# How long a game being ended may take to end before it is cancelled again.
+GAME_CANCEL_GRACE_S = 1.0
+# Records the disk refused, each with where it goes and its clock: carried from game to game.
+Unwritten = list[tuple[Session | EventLog, Record, float]]
 DEBUG_BLOCK_ENV = "KASPAR_DEBUG_LOOP_BLOCK_S"
 
 
@@ -126,9 +133,29 @@ class Daemon:
         self._playing: asyncio.Task[str] | None = None
         self._carried_problems: dict[FaultSource, str] = {}
         self._book: PhraseBook | None = None
+        self._ending: asyncio.Task[None] | None = None
+        self._resumable: Resumable | None = None
+        self._unwritten: Unwritten = []
+        # A session abandoned at the last read: shown in STATUS= until the next one opens.
+        self._notice: str | None = None
+        self._say_abandoned = False
 
     def _load(self) -> Config:
-        config = load_config(self.options.config_path)
+        """The configuration, as a robot the game is played on; ConfigError otherwise.
+
+        On the robot (without --sim) it must say which servos it drives: without a
+        [servos] table they would be simulated without a word.
+        """
+        path = self.options.config_path
+        config = load_config(path, playable=True)
+        if not self.options.sim and not servo_backend_given(path):
+            raise ConfigError(
+                path,
+                "servos.backend",
+                "no [servos] table with its backend: on the robot the servos would be "
+                "simulated without a word; say backend = 'real' with the robot's buses and "
+                "joints (systemd/kaspar-3.toml), or backend = 'sim', or run `kasparctl run --sim`",
+            )
         if self.options.state_dir is not None:
             config = msgspec.structs.replace(config, state_dir=self.options.state_dir)
         return config
@@ -244,24 +271,32 @@ class Daemon:
     async def _one_session(self) -> None:
         assert self.hw is not None
         resumed = None
+        self._resumable = None
         self._read_again = False
+        unread = True
         if self._take_lock():
+            self._write_carried()
             try:
                 resumed = self._resume()
-            except UNREADABLE as error:
+                unread = False
+            except StorageFailed as error:
                 detail = f"cannot read the sessions in {self.state_dir}: {error}"
                 log.error("sessions unreadable", state_dir=str(self.state_dir), error=str(error))
-                self._pending_faults.append(HardwareFault(FaultSource.STORAGE, detail))
+                self._pending_faults.append(HardwareFault(FaultSource.STORAGE, detail, error=error))
+            except Exception as error:  # a bug reading them must not stop the robot either
+                log.error("sessions could not be read", exc_info=error)
+                detail = f"cannot read the sessions in {self.state_dir}: {error!r}"
+                self._pending_faults.append(HardwareFault(FaultSource.SOFTWARE, detail))
         # Until the sessions are read (and the directory locked) no session may start:
         # a resume from the fault ends this game, and the next one reads them again.
-        self._read_again = not self.lock.held or any(
+        self._read_again = unread or any(
             fault.kind is FaultSource.STORAGE for fault in self._pending_faults
         )
         faults, self._pending_faults = self._pending_faults, []
         assert self._book is not None  # read in _run
         picker = PhrasePicker(self._book, np.random.default_rng())
         game = Game(
-            self.config,
+            self._config_of(resumed),
             self.hw,
             picker,
             self._open_session,
@@ -269,11 +304,15 @@ class Daemon:
             event_log=self.events,
             startup_faults=faults,
             known_problems=self._carried_problems,
+            unwritten=self._unwritten,
         )
         game.listeners.append(self._on_game_event)
         game.listeners.extend(self.listeners)
         self.game = game
-        self.notifier.status(status_line(game.stage, game.problems))
+        self.notifier.status(self._status(game))
+        if self._say_abandoned:
+            self._say_abandoned = False
+            game.speech.announce_soon("session.abandoned")
         playing = asyncio.create_task(game.run(), name="game")
         self._playing = playing
         stopping = asyncio.create_task(self._stopping.wait())
@@ -290,8 +329,13 @@ class Daemon:
             log.error("game ended by an error", exc_info=failure)
             detail = f"the game ended by an error: {failure!r}"
             self._pending_faults.append(HardwareFault(FaultSource.SOFTWARE, detail))
+        if self._ending is not None:
+            await asyncio.gather(self._ending, return_exceptions=True)
+            self._ending = None
         self._playing = None
         game.flush_unwritten()
+        # What the disk still refuses is written by the next game (or before the next read).
+        self._unwritten = game.unwritten
         # Not over with the game: the keyfob still away (its report was this game's),
         # the voice or the disk until a line is heard or a record written.
         self._carried_problems = {
@@ -304,41 +348,96 @@ class Daemon:
         if self._reload:
             self._apply_reload()
 
+    def _write_carried(self) -> None:
+        """Write the records an earlier game kept, in order, as far as the disk takes them."""
+        while self._unwritten:
+            target, record, at = self._unwritten[0]
+            try:
+                target.record(record, at)
+            except StorageFailed as error:
+                log.error(
+                    "records still not written; the journal holds them",
+                    count=len(self._unwritten),
+                    error=str(error),
+                )
+                return
+            self._unwritten.pop(0)
+
+    def _status(self, game: Game) -> str:
+        return status_line(game.stage, game.problems, self._notice)
+
     def _on_game_event(self, event: GameEvent, info: dict[str, Any]) -> None:
         game = self.game
-        if game is None or event not in (GameEvent.STATE, GameEvent.PROBLEMS):
+        if game is None or event not in (GameEvent.STATE, GameEvent.PROBLEMS, GameEvent.SESSION):
             return
-        self.notifier.status(status_line(game.stage, game.problems))
+        if event is GameEvent.SESSION:
+            self._notice = None  # the next session has begun: the abandoned one is old news
+        self.notifier.status(self._status(game))
         if event is GameEvent.STATE and info["state"] == "idle" and self._read_again:
             # Resumed from the storage fault: read the sessions again before any starts.
             self._read_again = False
             self._end_game()
 
     def _end_game(self) -> None:
-        if self._playing is not None and not self._playing.done():
-            self._playing.cancel()
+        playing = self._playing
+        if playing is None or playing.done() or self._ending is not None:
+            return
+        self._ending = asyncio.get_running_loop().create_task(self._cancel_until_done(playing))
+
+    @staticmethod
+    async def _cancel_until_done(playing: asyncio.Task[str]) -> None:
+        # transitions takes a cancellation that lands inside a trigger for a newer
+        # trigger's and swallows it (the game would play on, its sessions unread):
+        # cancelled again until it has ended.
+        while not playing.done():
+            playing.cancel()
+            await asyncio.wait({playing}, timeout=GAME_CANCEL_GRACE_S)
 
     # -- sessions --------------------------------------------------------------------
 
+    def _config_of(self, resumed: tuple[Session, SessionPlan, GameState] | None) -> Config:
+        """The configuration a game plays: a resumed session keeps the learner it began with."""
+        return self._resumable.config(self.config) if resumed and self._resumable else self.config
+
     def _resume(self) -> tuple[Session, SessionPlan, GameState] | None:
-        directory = find_unfinished(self.state_dir)
-        if directory is None:
+        """The unfinished session to carry on; each that cannot be is abandoned on the way.
+
+        StorageFailed when the sessions cannot be read or an abandon cannot be written.
+        """
+        clock = asyncio.get_running_loop().time()
+        outcome = resume_or_abandon(self.state_dir, self.config.game, self.config.profile, clock)
+        for abandoned in outcome.abandoned:
+            self._note_abandoned(abandoned, clock)
+        resumable = self._resumable = outcome.resumable
+        if resumable is None:
             return None
-        session, warnings = Session.open(directory)
-        for warning in warnings:
-            log.warning("session repaired", detail=warning)
-        plan = msgspec.convert(session.plan["plan"], type=SessionPlan)
-        snapshot, later = session.load_state()
-        params = self.config.profile(plan.profile)
-        state = restore(snapshot, later, self.config.game, params, session.plan.get("seed"))
+        session, state = resumable.session, resumable.state
+        # Records kept for this very session by an earlier game go on from its seq on disk.
+        self._unwritten = [
+            (session if isinstance(t, Session) and t.directory == session.directory else t, r, c)
+            for t, r, c in self._unwritten
+        ]
         log.info("resuming session", session=session.id, step=state.step, trials=state.trials)
-        return session, plan, state
+        return session, resumable.plan, state
+
+    def _note_abandoned(self, abandoned: Abandoned, clock: float) -> None:
+        """Shown in STATUS=, said when the game begins, and in the event log."""
+        what = f"session {abandoned.session_id} abandoned (cannot be resumed): {abandoned.reason}"
+        self._notice = what
+        self._say_abandoned = True
+        record = SessionRecord(
+            event=SessionEvent.ABANDONED,
+            reason=f"{abandoned.session_id}: {abandoned.reason}",
+            state="idle",
+        )
+        self.events.record(record, clock)  # StorageFailed: a storage fault, as any
 
     def _open_session(self) -> tuple[Session, SessionPlan, GameState]:
         plan = self._next_plan()
         seed = (
             self.config.game.seed if self.config.game.seed is not None else secrets.randbelow(2**31)
         )
+        params = self.config.profile(plan.profile)
         session = Session.create(
             self.state_dir,
             {
@@ -347,22 +446,26 @@ class Daemon:
                 "variant": self.config.game.variant,
                 "seed": seed,
                 "plan": msgspec.to_builtins(plan),
+                "learner": frozen_learner(plan.profile, params),
             },
             robot=self.config.robot(),
         )
-        state = GameState.new(self.config.game, self.config.profile(plan.profile), seed)
+        state = GameState.new(self.config.game, params, seed)
         log.info("session opened", session=session.id, group=plan.group, condition=plan.condition)
         return session, plan, state
 
     def _next_plan(self) -> SessionPlan:
-        """The first planned group without a finished session; then the last one again."""
+        """The first planned group without a finished session; then the last one again.
+
+        An abandoned session did not finish: its group is played again.
+        """
         plans = self.config.sessions
         if not plans:
             return SessionPlan(group="unplanned")
         done = set()
         for directory in session_dirs(self.state_dir):
-            if is_finished(directory):
-                with contextlib.suppress(OSError, msgspec.DecodeError, KeyError, TypeError):
+            if is_finished(directory) and abandoned_reason(directory) is None:
+                with contextlib.suppress(OSError, *UNDECODABLE, KeyError, TypeError):
                     done.add(msgspec.json.decode((directory / PLAN_FILE).read_bytes())["group"])
         return next((plan for plan in plans if plan.group not in done), plans[-1])
 

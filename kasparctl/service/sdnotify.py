@@ -21,6 +21,9 @@ class Notifier:
             # A leading "@" names a Linux abstract socket: a NUL byte on the wire.
             self._address = "\0" + address[1:] if address.startswith("@") else address
             self._socket = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC)
+            # Never wait on the event loop: a full queue (systemd busy) loses one status,
+            # where a blocking send would hold every gesture and the stop itself.
+            self._socket.setblocking(False)
 
     @property
     def enabled(self) -> bool:

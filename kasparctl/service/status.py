@@ -30,20 +30,31 @@ PROBLEM_WORDS = {
     FaultSource.KEYFOB: "keyfob not connected",
     FaultSource.VOICE: "voice failing",
     FaultSource.SOFTWARE: "software error",
-    FaultSource.STORAGE: "records cannot be saved",
+    FaultSource.STORAGE: "CANNOT SAVE the records",
 }
+# What the researcher does about it: nothing more is played until it saves again.
+STORAGE_ADVICE = (
+    " - stop the session (both) or free the disk; nothing is played unsaved, what is on disk"
+    " is kept, and long red resumes once it saves again"
+)
 # systemd keeps STATUS= whole, but a line this long is still read at a glance.
 DETAIL_LIMIT = 200
 STATUS_LIMIT = 600
 
 
-def status_line(stage: str, problems: Mapping[FaultSource, str] | None = None) -> str:
-    """The STATUS= text for `stage` with `problems` (part -> why), each reason cut to a limit."""
+def status_line(
+    stage: str, problems: Mapping[FaultSource, str] | None = None, notice: str | None = None
+) -> str:
+    """The STATUS= text for `stage` with `problems` (part -> why), each reason cut to a limit,
+    and a `notice` (a session abandoned) last."""
     words = STATUS_WORDS.get(stage, stage)
     parts = [
         f"{PROBLEM_WORDS[kind]}: {_cut(detail, DETAIL_LIMIT)}"
+        + (STORAGE_ADVICE if kind is FaultSource.STORAGE else "")
         for kind, detail in (problems or {}).items()
     ]
+    if notice:
+        parts.append(_cut(notice, DETAIL_LIMIT))
     return _cut(" | ".join([words, *parts]), STATUS_LIMIT)
 
 

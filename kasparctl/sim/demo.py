@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import errno
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -30,9 +31,16 @@ from kasparctl.config import Config, SessionPlan, parse_config
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.machine import Game
 from kasparctl.game.phrases import PhrasePicker, load_phrasebook
-from kasparctl.game.session import EventLog, Session, find_unfinished
+from kasparctl.game.records import FaultSource
+from kasparctl.game.session import (
+    Abandoned,
+    EventLog,
+    Session,
+    frozen_learner,
+    resume_or_abandon,
+)
 from kasparctl.game.stages import ENDS
-from kasparctl.game.state import GameState, restore
+from kasparctl.game.state import GameState
 from kasparctl.sim import simtime
 from kasparctl.sim.children import MAX_RESUMES, Hands, SimulatedGroup
 from kasparctl.sim.simulate import draw_answer_key
@@ -61,6 +69,35 @@ def demo_config() -> Config:
     """The demo's built-in robot: Kaspar 3's head, face and pointing arm, simulated."""
     text = resources.files("kasparctl.sim").joinpath("demo.toml").read_text(encoding="utf-8")
     return parse_config(text, "kasparctl/sim/demo.toml")
+
+
+class Transcript:
+    """The demo's printed lines; a reader that went away (`kasparctl demo | head`) ends the
+    demo quietly rather than fault every line Kaspar says into a closed pipe."""
+
+    def __init__(self, stream: TextIO) -> None:
+        """Print into `stream` until its reader goes away."""
+        self.stream = stream
+        self.gone = False
+        self.on_gone: Callable[[], None] | None = None
+
+    def write(self, text: str) -> int:
+        """Print `text`; once the reader is gone, nothing (and the demo is ended)."""
+        if not self.gone:
+            try:
+                self.stream.write(text)
+                self.stream.flush()
+            except BrokenPipeError:
+                self._went()
+        return len(text)
+
+    def flush(self) -> None:
+        """Nothing to flush: every write is flushed (a demo is read as it plays)."""
+
+    def _went(self) -> None:
+        self.gone = True
+        if self.on_gone is not None:
+            self.on_gone()
 
 
 @dataclass
@@ -113,27 +150,59 @@ class DemoRig(Generic[ServosT]):
     children: SimulatedGroup | None
     resumed: bool
     state_dir: Path
+    # The printed lines, when they may lose their reader (the command's stdout).
+    transcript: Transcript | None = None
+    # Sessions found unfinished that could not be resumed, closed as abandoned.
+    abandoned: list[Abandoned] = field(default_factory=list)
+    # Why the records could not be saved, once they could not: the demo ends there.
+    storage_failed: str | None = None
 
     async def run(self) -> DemoResult:
-        """Start the simulated hardware, play (or resume) the session, close everything."""
+        """Start the simulated hardware, play (or resume) the session, close everything.
+
+        DemoStorageFailed when the records cannot be saved: nobody is there to free the
+        disk, so the demo ends (what was written stays; it resumes from there next time).
+        """
         await self.servos.start()
         for group in self.servos.groups:
             # Powered on limp; torque on holds each joint where it is (no jump).
             await self.servos.set_compliant(group, False)
         await self.keyfob.start()
+        storage = asyncio.Event()
+
+        def on_storage_fault(event: GameEvent, info: dict[str, Any]) -> None:
+            if event is GameEvent.FAULT and info.get("kind") is FaultSource.STORAGE:
+                self.storage_failed = str(info.get("detail"))
+                storage.set()
+
+        self.game.listeners.insert(0, on_storage_fault)
+        reader_gone = asyncio.Event()
+        if self.transcript is not None:
+            self.transcript.on_gone = reader_gone.set
         try:
-            final = await self.game.run()
+            final = await _play_until(self.game, storage, reader_gone)
         finally:
             if self.children is not None:
                 await self.children.close()
             await self.keyfob.close()
             await self.voice.close()
             await self.servos.close()
+            self.game.flush_unwritten()
             if self.game.event_log is not None:
                 self.game.event_log.close()
+            if self.game.session is not None:
+                self.game.session.close()
+        if reader_gone.is_set():
+            # Nobody reads the demo any more: as a closed pipe ends any command (exit 0);
+            # its session, if one opened, resumes at the next demo on this directory.
+            raise BrokenPipeError(errno.EPIPE, "the demo's reader went away")
         state, session = self.game.session_state, self.game.session
-        assert state is not None and session is not None
-        session.close()
+        if self.storage_failed is not None or state is None or session is None:
+            raise DemoStorageFailed(
+                f"the records cannot be saved: {self.storage_failed or 'no session was opened'}; "
+                f"what was written is kept in {self.state_dir}, and the session resumes from "
+                "there once the disk takes records again"
+            )
         return DemoResult(
             session=session.id,
             finished=final == "finished",
@@ -178,12 +247,19 @@ def assemble(
     book = load_phrasebook(config.language, config.phrases_dir)
     picker = PhrasePicker(book, np.random.default_rng([options.seed, 2]))
     plan = config.sessions[0] if config.sessions else SessionPlan(group="demo")
-    resumed = _resume(config, options.state_dir)
-    if resumed is not None:
+    outcome = resume_or_abandon(options.state_dir, config.game, config.profile)
+    for abandoned in outcome.abandoned:
+        why = abandoned.reason
+        narrate(f"session {abandoned.session_id} abandoned, it cannot be resumed: {why}")
+    resumed = None
+    if outcome.resumable is not None:
+        resumed = outcome.resumable.session, outcome.resumable.plan, outcome.resumable.state
         plan = resumed[1]
+        config = outcome.resumable.config(config)
     answers = _answers(config, plan, options.seed)
 
     def open_session() -> tuple[Session, SessionPlan, GameState]:
+        params = config.profile(plan.profile)
         planned = msgspec.structs.replace(
             plan, answer_key=tuple(config.game.toys[a] for a in answers)
         )
@@ -195,10 +271,11 @@ def assemble(
                 "variant": config.game.variant,
                 "seed": options.seed,
                 "plan": msgspec.to_builtins(planned),
+                "learner": frozen_learner(planned.profile, params),
             },
             robot=config.robot(),
         )
-        state = GameState.new(config.game, config.profile(planned.profile), options.seed)
+        state = GameState.new(config.game, params, options.seed)
         return session, planned, state
 
     hardware = Hardware(servos, keyfob, voice)
@@ -222,7 +299,11 @@ def assemble(
         )
         game.listeners.append(children)
     game.listeners.append(_narrator(narrate))
-    return DemoRig(game, servos, keyfob, voice, children, resumed is not None, options.state_dir)
+    transcript = out if isinstance(out, Transcript) else None
+    return DemoRig(
+        game, servos, keyfob, voice, children, resumed is not None, options.state_dir,
+        transcript=transcript, abandoned=outcome.abandoned,
+    )
 
 
 async def play(config: Config, options: DemoOptions) -> DemoResult:
@@ -230,16 +311,21 @@ async def play(config: Config, options: DemoOptions) -> DemoResult:
     return await build(config, options).run()
 
 
-def _resume(config: Config, state_dir: Path) -> tuple[Session, SessionPlan, GameState] | None:
-    directory = find_unfinished(state_dir)
-    if directory is None:
-        return None
-    session, _warnings = Session.open(directory)
-    plan = msgspec.convert(session.plan["plan"], type=SessionPlan)
-    snapshot, later = session.load_state()
-    params = config.profile(plan.profile)
-    state = restore(snapshot, later, config.game, params, session.plan.get("seed"))
-    return session, plan, state
+async def _play_until(game: Game, *stops: asyncio.Event) -> str:
+    """Play the game to its end, or end it at the first of `stops` (the records cannot be
+    saved; nobody reads the transcript any more)."""
+    playing = asyncio.create_task(game.run(), name="demo game")
+    stopping = {asyncio.create_task(stop.wait()) for stop in stops}
+    try:
+        await asyncio.wait({playing, *stopping}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for task in stopping:
+            task.cancel()
+        # A cancellation inside a transitions trigger is swallowed: again until it ends.
+        while not playing.done():
+            playing.cancel()
+            await asyncio.wait({playing}, timeout=1.0)
+    return game.stage if playing.cancelled() else playing.result()
 
 
 def _answers(config: Config, plan: SessionPlan, seed: int) -> list[int]:
@@ -270,6 +356,10 @@ STALL_LIMIT_S = 12 * 3600.0
 
 class DemoStalled(Exception):
     """A simulated game that stopped making progress."""
+
+
+class DemoStorageFailed(Exception):
+    """The demo's records could not be saved (the disk full, the directory gone): it ended."""
 
 
 def run_demo(
