@@ -110,8 +110,8 @@ def test_a_state_directory_without_permission_is_one_line(tmp_path: Path) -> Non
         (["demo", "--fast", "--state-dir", str(locked / "state")],
          f"error: {locked / 'state'}: cannot use the state directory: Permission denied"),
         (["sessions", "--state-dir", str(locked)],
-         f"error: {locked / 'sessions'}: permission denied (run it as the service's user, e.g. "
-         "with sudo -u kaspar)"),
+         f"error: {locked / 'sessions'}: permission denied (the state directory is private to "
+         "the robot's service user: run as that user, or with sudo)"),
     ]:  # fmt: skip
         result = subprocess.run(
             [*no_override, sys.executable, "-m", "kasparctl", *arguments],
