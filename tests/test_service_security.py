@@ -257,6 +257,8 @@ def test_records_hold_no_personal_data_beyond_the_plan(
     # The plan keeps the names it was given and nothing else about the children.
     assert set(plan["plan"]) <= {
         "group",
+        "number",
+        "script",
         "profile",
         "speak_uncertainty",
         "children",

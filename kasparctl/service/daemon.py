@@ -48,9 +48,9 @@ from hal.errors import HalError
 from kasparctl.config import Config, SessionPlan, load_config
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.lock import StateDirBusy, StateDirLock
-from kasparctl.game.machine import Game, HardwareFault
+from kasparctl.game.machine import Game, HardwareFault, planned
 from kasparctl.game.phrases import PhraseBook, PhrasePicker, load_phrasebook
-from kasparctl.game.records import FaultSource
+from kasparctl.game.records import FaultSource, SessionEvent, SessionRecord, StepRecord
 from kasparctl.game.session import (
     PLAN_FILE,
     EventLog,
@@ -60,6 +60,7 @@ from kasparctl.game.session import (
     is_finished,
     session_dirs,
 )
+from kasparctl.game.stages import ENDS
 from kasparctl.game.state import GameState, StateError, restore
 from kasparctl.log import configure_logging
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
@@ -84,7 +85,8 @@ class DaemonOptions:
     config_path: str
     sim: bool = False
     state_dir: str | None = None
-    # With sim: the keyfob's keys from this fifo, which may appear later (FifoKeyfob).
+    # With sim: the keys (the children's and the researcher's) from this fifo, which may
+    # appear later (FifoKeyfob).
     keys: str | None = None
 
 
@@ -213,18 +215,15 @@ class Daemon:
 
     def _build_hardware(self) -> Hardware:
         clock = LoopClock()
-        hardware = build(
+        return build(
             self.config.servos,
             self.config.keyfob,
             self.config.voice,
             clock,
+            researcher=self.config.researcher,
             sim=self.options.sim,
+            sim_keys_fifo=self.options.keys,
         )
-        if self.options.keys is not None:
-            from hal.keyfob.sim import FifoKeyfob
-
-            hardware.keyfob = FifoKeyfob(self.options.keys, clock)
-        return hardware
 
     async def _open_hardware(self) -> None:
         assert self.hw is not None
@@ -240,14 +239,17 @@ class Daemon:
             detail = f"servos not ready: {error}"
             self._pending_faults.append(HardwareFault(FaultSource.SERVO, detail))
         await self.hw.keyfob.start()
+        if self.hw.researcher is not None:
+            await self.hw.researcher.start()
 
     async def _one_session(self) -> None:
         assert self.hw is not None
-        resumed = None
+        resumed = stopped = None
         self._read_again = False
         if self._take_lock():
             try:
                 resumed = self._resume()
+                stopped = None if resumed is not None else self._stopped_waiting()
             except UNREADABLE as error:
                 detail = f"cannot read the sessions in {self.state_dir}: {error}"
                 log.error("sessions unreadable", state_dir=str(self.state_dir), error=str(error))
@@ -266,6 +268,7 @@ class Daemon:
             picker,
             self._open_session,
             resumed,
+            stopped=stopped,
             event_log=self.events,
             startup_faults=faults,
             known_problems=self._carried_problems,
@@ -301,6 +304,8 @@ class Daemon:
         }
         if game.session is not None:
             game.session.close()
+        if game.stopped_waiting is not None:
+            game.stopped_waiting[0].close()  # neither reopened nor closed in this game
         if self._reload:
             self._apply_reload()
 
@@ -339,31 +344,52 @@ class Daemon:
         seed = (
             self.config.game.seed if self.config.game.seed is not None else secrets.randbelow(2**31)
         )
-        session = Session.create(
-            self.state_dir,
-            {
-                "group": plan.group,
-                "condition": plan.condition,
-                "variant": self.config.game.variant,
-                "seed": seed,
-                "plan": msgspec.to_builtins(plan),
-            },
-        )
+        session = Session.create(self.state_dir, planned(self.config, plan, seed))
         state = GameState.new(self.config.game, self.config.profile(plan.profile), seed)
         log.info("session opened", session=session.id, group=plan.group, condition=plan.condition)
         return session, plan, state
 
     def _next_plan(self) -> SessionPlan:
-        """The first planned group without a finished session; then the last one again."""
+        """The first planned session (group and number) not yet ended; then the last again.
+
+        A session ends finished, or stopped (the researcher then reopens it with "next",
+        or closes it with "stop": a stopped session waits for that choice, see
+        _stopped_waiting). Sessions recorded before plans were numbered are number 1.
+        """
         plans = self.config.sessions
         if not plans:
             return SessionPlan(group="unplanned")
-        done = set()
+        done: set[tuple[str, int]] = set()
         for directory in session_dirs(self.state_dir):
             if is_finished(directory):
                 with contextlib.suppress(OSError, msgspec.DecodeError, KeyError, TypeError):
-                    done.add(msgspec.json.decode((directory / PLAN_FILE).read_bytes())["group"])
-        return next((plan for plan in plans if plan.group not in done), plans[-1])
+                    meta = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
+                    done.add((meta["group"], int(meta.get("number", 1))))
+        return next((p for p in plans if (p.group, p.number) not in done), plans[-1])
+
+    def _stopped_waiting(self) -> tuple[Session, SessionPlan, GameState] | None:
+        """The latest session, if the researcher stopped it and has not closed it yet."""
+        directories = list(session_dirs(self.state_dir))
+        if not directories:
+            return None
+        latest = directories[-1]
+        if not is_finished(latest):
+            return None
+        session, _warnings = Session.open(latest)
+        records = session.records()
+        ends = [r.to for r in records if isinstance(r, StepRecord) and r.to in ENDS]
+        closed = any(
+            isinstance(r, SessionRecord) and r.event is SessionEvent.CLOSED for r in records
+        )
+        if not ends or ends[-1] != "stopped" or closed:
+            session.close()
+            return None
+        plan = msgspec.convert(session.plan["plan"], type=SessionPlan)
+        snapshot, later = session.load_state()
+        params = self.config.profile(plan.profile)
+        state = restore(snapshot, later, self.config.game, params, session.plan.get("seed"))
+        log.info("a stopped session waits: next reopens it, stop closes it", session=session.id)
+        return session, plan, state
 
     # -- signals, reload, watchdog ------------------------------------------------------
 
@@ -450,6 +476,8 @@ class Daemon:
         except (HalError, TimeoutError) as error:
             log.error("could not bring Kaspar to rest", error=str(error) or "timed out")
         await hw.keyfob.close()
+        if hw.researcher is not None:
+            await hw.researcher.close()
         await hw.voice.close()
         await hw.servos.close()
         log.info("stopped", reason=self._stop_reason)

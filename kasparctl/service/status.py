@@ -31,6 +31,7 @@ PROBLEM_WORDS = {
     FaultSource.VOICE: "voice failing",
     FaultSource.SOFTWARE: "software error",
     FaultSource.STORAGE: "records cannot be saved",
+    FaultSource.RESEARCHER: "researcher's device not connected",
 }
 # systemd keeps STATUS= whole, but a line this long is still read at a glance.
 DETAIL_LIMIT = 200
