@@ -302,9 +302,14 @@ def run_daemon(
     monkeypatch: pytest.MonkeyPatch,
     scenario: Callable[[FaultRig], Awaitable[None]],
     variant: str = "names",
+    *,
+    config: Path | None = None,
 ) -> FaultRig:
-    """The daemon on the rig in simulated time, `scenario` beside it; stopped after it."""
-    config_path = write_config(tmp_path, variant)
+    """The daemon on the rig in simulated time, `scenario` beside it; stopped after it.
+
+    `config` replaces the rig's own configuration (write_config's).
+    """
+    config_path = config if config is not None else write_config(tmp_path, variant)
     state_dir = tmp_path / "state"
     log = io.StringIO()
     configure_logging("debug", "json", stream=log)

@@ -20,7 +20,7 @@ from kasparctl.game.session import RECORDS_FILE
 from kasparctl.game.stages import STATES, TRANSITIONS
 from kasparctl.sim import simtime
 from kasparctl.sim.demo import DemoOptions, DemoResult, DemoRig, build, demo_config, with_variant
-from kasparctl.sim.teacher import Teacher
+from kasparctl.sim.teacher import Messiness, Teacher
 
 
 def config_for(variant: str = "names", **game_changes: Any) -> Config:
@@ -47,10 +47,17 @@ def play(
     teacher: Teacher | None = None,
     scenario: Callable[[DemoRig], Coroutine[Any, Any, None]] | None = None,
     children_answers: list[int] | None = None,
+    messiness: Messiness | None = None,
 ) -> tuple[DemoResult, DemoRig, str]:
     """One game in simulated time; `scenario` runs beside it, acting on the rig."""
     out = io.StringIO()
-    options = DemoOptions(state_dir=tmp_path, seed=seed, teacher=teacher or Teacher(), out=out)
+    options = DemoOptions(
+        state_dir=tmp_path,
+        seed=seed,
+        teacher=teacher or Teacher(),
+        messiness=messiness or Messiness(),
+        out=out,
+    )
 
     async def main() -> tuple[DemoResult, DemoRig]:
         rig = build(config or config_for(), options, children_answers)

@@ -82,22 +82,53 @@ async def test_closing_abandons_the_question() -> None:
 
 async def test_a_gesture_begun_while_the_children_are_asked_is_theirs() -> None:
     """The one-keyfob rule: a hold is a command only if it began while nobody was asked
-    (from a question's start to its answer, both included), or once Kaspar has asked
-    for a grown-up's help."""
+    (from a question's start to the gap for extras after its answer), or once Kaspar has
+    asked for a grown-up's help."""
     presses = ChildPresses(extra_press_gap_s=1.0)
     assert not presses.asking_at(0.5)  # nothing asked yet
     presses.open(1.0)
     assert presses.asking_at(1.0) and presses.asking_at(1.5)
     presses.asked(2.0)
     assert presses.asking_at(3.0)  # the question waits for its answer
-    presses.press("green", 4.0, "guessing")  # answered: a hold begun here is still theirs
+    presses.press("green", 4.0, "guessing")  # answered: a hold begun here is still theirs,
     assert presses.asking_at(4.0)
-    assert not presses.asking_at(4.1)  # Kaspar reacts: nobody is asked
+    assert presses.asking_at(4.9)  # and one begun as a late extra (within the gap),
+    assert not presses.asking_at(5.1)  # but not once Kaspar reacts: nobody is asked
     presses.open(6.0)
     presses.asked(7.0)
     assert presses.asking_at(8.0)
-    presses.hand_to_researcher()  # "I need a grown-up to help me."
+    presses.hand_to_researcher(20.0)  # "I need a grown-up to help me."
+    assert presses.asking_at(19.0)  # a child's hold begun before is still theirs
     assert not presses.asking_at(30.0)
     assert presses.asking_at(4.0)  # the last question's answer is remembered
     presses.close(31.0)
     assert not presses.asking_at(math.inf)
+
+
+async def test_a_held_answer_counts_its_extras_from_when_it_was_taken() -> None:
+    """A hold decided 3 s after its key-down: a second child's press 0.5 s after that is
+    an extra of it, not a press with no question."""
+    presses = ChildPresses(extra_press_gap_s=1.0)
+    presses.open(0.0)
+    presses.asked(1.0)
+    assert presses.press("green", 2.0, "guessing", now=5.0).record is None
+    presses.answered(2.0, trial=4)
+    assert presses.press("red", 5.5, "guessing").record == PressRecord(
+        button="red", at=5.5, extra=True, trial=4
+    )
+    assert presses.asking_at(5.9) and not presses.asking_at(6.1)
+
+
+async def test_a_squeeze_begun_early_is_early_whatever_its_second_button_meets() -> None:
+    """Green early, red 0.05 s later as the guess begins: one squeeze, the first button's,
+    so neither is the answer; a press well after it is."""
+    presses = ChildPresses(extra_press_gap_s=1.0)
+    answer = presses.open(0.0)
+    assert presses.press("green", 2.95, "guessing").acknowledge
+    presses.last_words(3.0)
+    assert presses.press("red", 3.0, "guessing").record == PressRecord(
+        button="red", at=3.0, ignored=EARLY, early=True
+    )
+    presses.asked(4.0)
+    assert presses.press("green", 4.5, "guessing").record is None
+    assert await answer == ("green", 4.5)

@@ -110,17 +110,19 @@ class SimKeyfob:
         """Mark the keyfob closed; nothing else to release."""
         self._closed = True
 
-    async def perform(self, action: str) -> None:
+    async def perform(self, action: str) -> float:
         """Press the keys of one action, then wait until its gestures are certain.
 
         Key times are planned on the clock, so a stalled process cannot turn a
-        press into a long press. Raises InvalidArgument for an unknown action.
+        press into a long press. Returns when its first key went down (one action at a
+        time: a keyfob has one pair of buttons). Raises InvalidArgument for an unknown
+        action.
         """
         async with self._lock:
             # Key times are the planned ones, as a real keyfob's carry the kernel's
             # timestamps: a process stalled mid-press (a busy machine, a fast
             # simulated clock) must not turn a child's press into a long press.
-            planned = self._clock.now()
+            planned = started = self._clock.now()
             for step in self._steps(action):
                 if isinstance(step, float):
                     planned += step
@@ -129,6 +131,7 @@ class SimKeyfob:
                     button, down = step
                     self._publish(self._recogniser.key(button, down, planned))
             await self._settle()
+        return started
 
     def _steps(self, action: str) -> list[float | tuple[str, bool]]:
         words = action.split()

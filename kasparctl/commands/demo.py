@@ -33,7 +33,7 @@ from kasparctl.sim.demo import (
     run_demo,
     with_variant,
 )
-from kasparctl.sim.teacher import Teacher, TeacherError
+from kasparctl.sim.teacher import Messiness, Teacher, TeacherError
 
 
 def register(subparsers: Any) -> None:
@@ -56,6 +56,12 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--p-wrong-green", type=float, default=0.0)
     parser.add_argument("--p-wrong-red", type=float, default=0.0)
     parser.add_argument("--p-no-answer", type=float, default=0.0)
+    # Messy children, per answer: a hold, a double tap, both buttons, a press while
+    # Kaspar is still asking. None of it may become a researcher's command.
+    parser.add_argument("--p-hold", type=float, default=0.0, help="an answer held 0.6-5 s")
+    parser.add_argument("--p-double", type=float, default=0.0, help="an answer pressed twice")
+    parser.add_argument("--p-both", type=float, default=0.0, help="both buttons squeezed")
+    parser.add_argument("--p-early", type=float, default=0.0, help="a press while Kaspar asks")
     parser.add_argument(
         "--json", action="store_true", help="end with one JSON line summarising the game"
     )
@@ -85,6 +91,9 @@ def run(arguments: argparse.Namespace) -> int:
         if arguments.variant and arguments.variant != config.game.variant:
             config = with_variant(config, arguments.variant)
         teacher = Teacher(arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)
+        messiness = Messiness(
+            arguments.p_hold, arguments.p_double, arguments.p_both, arguments.p_early
+        )
     except (ConfigError, TeacherError, LearnerError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
@@ -98,7 +107,11 @@ def run(arguments: argparse.Namespace) -> int:
     seed = arguments.seed if arguments.seed is not None else secrets.randbelow(2**31)
     state_dir = Path(arguments.state_dir or tempfile.mkdtemp(prefix="kaspar-demo-"))
     options = DemoOptions(
-        state_dir=state_dir, seed=seed, teacher=teacher, interactive=arguments.interactive
+        state_dir=state_dir,
+        seed=seed,
+        teacher=teacher,
+        messiness=messiness,
+        interactive=arguments.interactive,
     )
     lock = StateDirLock(state_dir)
     try:

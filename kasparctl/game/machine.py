@@ -516,7 +516,7 @@ class Game:
         await self._on_command(command, name, gesture.at, "keyfob")
 
     def _child_press(self, button: str, at: float) -> None:
-        outcome = self.presses.press(button, at, self.stage)
+        outcome = self.presses.press(button, at, self.stage, self._now())
         if outcome.record is not None:
             self._record(outcome.record)
         if outcome.acknowledge:
@@ -1145,11 +1145,11 @@ class Game:
                 # Not wait_for: on Python 3.11 it can drop a pause that lands as the answer does.
                 async with asyncio.timeout(delay):
                     return await asyncio.shield(answer)
+            if index == len(prompts) - 1:
+                self.presses.hand_to_researcher(self._now())
             self._record(PromptRecord(line=key, waited=delay))
             self._emit(GameEvent.PROMPT, line=key)
             await self.speech.say(key, **values)
-            if index == len(prompts) - 1:
-                self.presses.hand_to_researcher()
         return await answer
 
     # -- speaking, recording ----------------------------------------------------

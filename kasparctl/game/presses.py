@@ -7,18 +7,24 @@ the toy is named: a press there has heard the guess and is taken, recorded
 with its time) or, for a request, its end. Before that a press is early: it
 cannot judge a guess not yet made (the paper's children reward the choice
 Kaspar announced), so it is never the answer, but it is never met with
-silence either: Kaspar says once per question that it is still talking.
+silence either: Kaspar says once per question that it is still talking. A
+press within SAME_GESTURE_S of an early one is part of it (the other button
+of a squeeze, the second tap of a double), early too, even if the question's
+last words began in between: a squeeze is the first button's, never the
+second's.
 
-After the answer, a press within `extra_press_gap_s` is an extra (the second
-tap of a double, the other button of a squeeze, a second child a moment too
-late), recorded with the trial it followed. Any other press has no question to
-answer and is recorded as such.
+After the answer, a press within `extra_press_gap_s` of the moment it was taken
+(its key-down, or later for a hold decided at its release or its threshold) is an
+extra (the second tap of a double, the other button of a squeeze, a second child
+a moment too late), recorded with the trial it followed. Any other press has no
+question to answer and is recorded as such.
 
 One rule more, for a researcher who has only the children's keyfob: a gesture
 that began while the children were being asked (from the start of a question
-to its answer, both included) is the children's, whatever it became (a hold of
-3 s, both buttons held): `asking_at` says so. Once Kaspar has asked for a
-grown-up's help (`hand_to_researcher`), a hold is the grown-up's again.
+to `extra_press_gap_s` after its answer was taken) is the children's, whatever
+it became (a hold of 3 s, both buttons held): `asking_at` says so. Once Kaspar
+has begun to ask for a grown-up's help (`hand_to_researcher`), a hold begun from
+then on is the grown-up's again.
 
 Pure bookkeeping on the times it is given: the game (kasparctl.game.machine)
 feeds it and acts on what it returns.
@@ -38,6 +44,8 @@ from kasparctl.game.records import PressRecord
 Press = tuple[str, float]  # the key ("green" or "red") and when it went down
 
 EARLY = "before the question was finished"
+# Presses this close together are one gesture: a squeeze of both buttons, a double tap.
+SAME_GESTURE_S = 0.4
 # How many past questions `asking_at` remembers: a hold decided 3 s after its
 # key-down may look back past the next question's start.
 _REMEMBERED = 4
@@ -64,11 +72,14 @@ class ChildPresses:
         self.answers_from = math.inf
         self.question_end = math.inf
         self._acknowledged = False
-        self._last_answer_at: float | None = None
+        self._last_early_at = -math.inf
+        self._last_answer_at: float | None = None  # when the last answer was taken
         self._last_answer_trial: int | None = None
+        self._taken_at = -math.inf
         # (start, end) of the recent times the children were asked; end inf while open.
         self._asked: deque[tuple[float, float]] = deque(maxlen=_REMEMBERED)
-        self.handed_to_researcher = False
+        # When Kaspar began to ask for a grown-up's help with the open question.
+        self.handed_at = math.inf
 
     @property
     def waiting(self) -> bool:
@@ -82,7 +93,8 @@ class ChildPresses:
         self.question_start = at
         self.answers_from = self.question_end = math.inf
         self._acknowledged = False
-        self.handed_to_researcher = False
+        self._last_early_at = -math.inf
+        self.handed_at = math.inf
         self._asked.append((at, math.inf))
         return self._answer
 
@@ -95,20 +107,25 @@ class ChildPresses:
         self.question_end = at
         self.answers_from = min(self.answers_from, at)
 
-    def hand_to_researcher(self) -> None:
-        """Kaspar has asked for a grown-up: a press still answers, a hold is a command."""
-        self.handed_to_researcher = True
+    def hand_to_researcher(self, at: float) -> None:
+        """Kaspar asks for a grown-up from `at`: a press still answers, a hold begun from
+        then on is a command."""
+        self.handed_at = min(self.handed_at, at)
 
-    def press(self, button: str, at: float, stage: str) -> Outcome:
-        """Take a press: the answer of the open question, or what to record instead."""
+    def press(self, button: str, at: float, stage: str, now: float | None = None) -> Outcome:
+        """Take a press that went down at `at` and is certain at `now` (`at` if not given):
+        the answer of the open question, or what to record instead."""
         answer, last = self._answer, self._last_answer_at
+        taken = at if now is None else max(at, now)
         if answer is not None and not answer.done():
-            if at >= self.answers_from:
+            if at >= self.answers_from and at - self._last_early_at > SAME_GESTURE_S:
                 answer.set_result((button, at))
-                self._end_asking(at)
+                self._taken_at = taken
+                self._end_asking(taken + self.extra_press_gap_s)
                 return Outcome(None)
             first = not self._acknowledged
             self._acknowledged = True
+            self._last_early_at = at
             record = PressRecord(
                 button=button,
                 at=at,
@@ -136,13 +153,14 @@ class ChildPresses:
 
         False once Kaspar has handed the open question to the researcher.
         """
-        if self.waiting and self.handed_to_researcher and at >= self.question_start:
+        if self.waiting and at >= self.handed_at:
             return False
         return any(start <= at <= end for start, end in self._asked)
 
     def answered(self, at: float, trial: int | None) -> None:
         """The answer pressed at `at` was recorded (as trial `trial`; None for a pose)."""
-        self._last_answer_at, self._last_answer_trial = at, trial
+        self._last_answer_at = max(at, self._taken_at)
+        self._last_answer_trial = trial
 
     def forget_answer(self) -> None:
         """The last answer was taken back: a press after it is no extra."""

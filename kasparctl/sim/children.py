@@ -84,13 +84,15 @@ class SimulatedGroup:
         pointing_group: str,
         command: Command,
         messiness: Messiness | None = None,
+        room: np.random.Generator | None = None,
         think_s: tuple[float, float] = (0.8, 2.5),
         researcher_s: float = 1.5,
         narrate: Say | None = None,
         patience: int = MAX_RESUMES,
     ) -> None:
         """Children who press `keyfob` and move `servos`, believing `answers` (a toy per
-        target); their researcher gives commands with `command`."""
+        target); their researcher gives commands with `command`. Where the bags are is
+        drawn from `room` (the same after a resume, when the children's `rng` is new)."""
         self.keyfob = keyfob
         self.servos = servos
         self.teacher = teacher
@@ -104,9 +106,13 @@ class SimulatedGroup:
         self.narrate = narrate or (lambda text: None)
         self.patience = patience
         self.presses: list[ChildPress] = []
+        # One keyfob for the group: a child waits for it, and then sees whether the
+        # question was answered meanwhile (by the child who had it).
+        self._keyfob_free = asyncio.Lock()
         self._tasks: set[asyncio.Task[None]] = set()
         self._silent_question: tuple[int, int, int] | None = None
         self._answered: set[int] = set()
+        self._room = room if room is not None else rng
         self._bag_poses: dict[int, dict[str, float]] = {}
         self._faults = 0
         self._state = "idle"
@@ -155,8 +161,7 @@ class SimulatedGroup:
         button: str = "", early: bool = False,
     ) -> None:  # fmt: skip
         self.narrate(f"{who} presses {action.upper()}")
-        start = asyncio.get_running_loop().time()
-        await self.keyfob.perform(action)
+        start = await self.keyfob.perform(action)
         if who == "the researcher":
             return
         self.presses.append(
@@ -198,11 +203,11 @@ class SimulatedGroup:
             return
         trial, target, choice = int(info["trial"]), int(info["target"]), int(info["choice"])
         await asyncio.sleep(delay)
-        if trial in self._answered:
-            return
         meant = "green" if choice == self.answers[target] else "red"
         action = self.messiness.action(meant, self.rng)
-        await self._press(action, "an eager child", trial=trial, button=meant, early=True)
+        async with self._keyfob_free:
+            if trial not in self._answered:
+                await self._press(action, "an eager child", trial=trial, button=meant, early=True)
 
     async def _answer(self, trial: int, target: int, choice: int, honest_now: bool = False) -> None:
         reply = self._reply(target, choice, honest_now)
@@ -211,11 +216,11 @@ class SimulatedGroup:
             self._silent_question = (trial, target, choice)
             return
         await self._think()
-        if trial in self._answered:
-            return  # an eager press in the question's last words answered it already
         button = "green" if reply else "red"
         action = self.messiness.action(button, self.rng)
-        await self._press(action, "a child", trial=trial, button=button)
+        async with self._keyfob_free:
+            if trial not in self._answered:  # an eager press may have answered it
+                await self._press(action, "a child", trial=trial, button=button)
 
     async def _teach(self, bag: int) -> None:
         await self._think()
@@ -223,13 +228,13 @@ class SimulatedGroup:
         # each child shows it a little differently.
         ranges = {j.name: j.range_deg for j in self.servos.settings.joints}
         joints = self.servos.groups[self.pointing_group]
-        if bag not in self._bag_poses:
+        while len(self._bag_poses) <= bag:  # in bag order: the same room after a resume
             pose = {}
             for joint in joints:
                 low, high = ranges[joint]
                 margin = (high - low) * 0.1
-                pose[joint] = float(self.rng.uniform(low + margin, high - margin))
-            self._bag_poses[bag] = pose
+                pose[joint] = float(self._room.uniform(low + margin, high - margin))
+            self._bag_poses[len(self._bag_poses)] = pose
         for joint, degrees in self._bag_poses[bag].items():
             low, high = ranges[joint]
             noise = float(self.rng.uniform(-SHOW_NOISE_DEG, SHOW_NOISE_DEG))

@@ -37,7 +37,7 @@ from kasparctl.config import Config, SessionPlan, parse_config
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.machine import Game, planned
 from kasparctl.game.phrases import PhrasePicker, load_phrasebook
-from kasparctl.game.records import AnyRecord, CommandRecord, TrialRecord
+from kasparctl.game.records import AnyRecord, CommandRecord, PoseRecord, TrialRecord
 from kasparctl.game.session import EventLog, Session, find_unfinished
 from kasparctl.game.stages import ENDS
 from kasparctl.game.state import GameState, restore
@@ -187,7 +187,7 @@ class DemoRig(Generic[ServosT]):
             answer_to_next_question_s=answer_to_next_question(trials),
             speech_s_per_trial=speech_per_trial(self.voice, trials),
             accidental_commands=accidental_commands(records, presses),
-            answers_lost=len(lost_answers(trials, presses)),
+            answers_lost=len(lost_answers(records, presses)),
         )
 
 
@@ -201,7 +201,8 @@ def build(
     """
     clock = LoopClock()
     servos = SimServos(config.servos, clock)
-    return assemble(config, options, servos, SimVoice(options.out, clock), children_answers)
+    voice = SimVoice(options.out, clock, clips=config.voice.clips)
+    return assemble(config, options, servos, voice, children_answers)
 
 
 def assemble(
@@ -260,6 +261,8 @@ def assemble(
             pointing_group=config.game.pointing_group,
             command=lambda name: researcher_command(config, keyfob, researcher, name),
             messiness=options.messiness,
+            # The bags stay where they were put, whatever was interrupted.
+            room=np.random.default_rng([options.seed, 4]),
             narrate=narrate,
             patience=patience,
         )
@@ -316,14 +319,22 @@ def accidental_commands(records: Sequence[AnyRecord], presses: Sequence[ChildPre
     return sum(any(p.downs[0] <= c.at <= p.up for p in presses) for c in commands)
 
 
-def lost_answers(trials: Sequence[TrialRecord], presses: Sequence[ChildPress]) -> list[int]:
-    """Trials whose answer is not the children's first press that could answer them.
+def lost_answers(records: Sequence[AnyRecord], presses: Sequence[ChildPress]) -> list[str]:
+    """The children's answers the game did not take as they meant them.
 
-    That press is their first one for the trial made after the question ended, or an
-    eager one the game took in the question's last words (the record says so); the
-    trial's button must be the one meant.
+    A trial's answer must be the children's first press for it made after the question
+    ended, or an eager one the game took in the question's last words (the record says
+    so; a double tap whose first tap came too early answers with its second), with the
+    button meant. In step 2 every press that showed a bag must be the time of a pose
+    record (Kaspar read the arm when it came, whatever the press became).
     """
-    lost = []
+    trials = [r for r in records if isinstance(r, TrialRecord)]
+    shown = {r.at for r in records if isinstance(r, PoseRecord)}
+    lost = [
+        f"bag {p.bag + 1} at {p.downs[0]:.3f}"
+        for p in presses
+        if p.bag is not None and not shown.intersection(p.downs)
+    ]
     by_trial: dict[int, list[ChildPress]] = {}
     for press in presses:
         if press.trial is not None:
@@ -331,12 +342,12 @@ def lost_answers(trials: Sequence[TrialRecord], presses: Sequence[ChildPress]) -
     latest: dict[int, TrialRecord] = {t.trial: t for t in trials}  # an undone trial is asked again
     for number, trial in latest.items():
         mine = by_trial.get(number, [])
-        taken = [p for p in mine if p.downs[0] == trial.feedback_at]
+        taken = [p for p in mine if trial.feedback_at in p.downs]
         after = [p for p in mine if p.downs[0] >= trial.question_end]
         meant = bool(taken) and taken[0].button == trial.feedback
         skipped = any(p.downs[0] < trial.feedback_at for p in after)
         if not meant or skipped:
-            lost.append(number)
+            lost.append(f"trial {number}")
     return lost
 
 
@@ -368,6 +379,8 @@ def _narrator(narrate: Callable[[str], None]) -> Listener:
     def listener(event: GameEvent, info: dict[str, Any]) -> None:
         if event is GameEvent.POINT:
             narrate(f"Kaspar points at {info['target']}")
+        elif event is GameEvent.LISTENING:
+            narrate("Kaspar listens")
         elif event is GameEvent.STATE and info["state"] in ("paused", "fault", *ENDS):
             narrate(f"the game is {info['state']}")
         elif event is GameEvent.SESSION:

@@ -118,5 +118,5 @@ class Messiness:
         """Seconds after Kaspar starts asking that an eager child presses, or None."""
         if self.tidy or self.p_early == 0.0:
             return None
-        when, draw = rng.random(2)
+        when, draw = (float(value) for value in rng.random(2))
         return EARLY_S[0] + when * (EARLY_S[1] - EARLY_S[0]) if draw < self.p_early else None
