@@ -12,8 +12,9 @@ logs a bag is an answer too):
     early: pressed while Kaspar is still asking, again once asked if need be 20 %
 
 in each place the researcher's commands can come from: their own device (the
-default; the children's keyfob carries answers only) and the children's keyfob
-alone (the researcher's holds of 3 s, begun while nobody is asked). Targets, per
+default; the children's keyfob carries answers only), the extra keys of the
+children's keypad, and the children's keyfob alone (the researcher's holds of
+3 s, begun while nobody is asked). Targets, per
 mode: 0 commands started by a child's press, 0 answers not taken as meant, every
 session finished. Also reported: the median time from an answer to the end of
 Kaspar's next question, and Kaspar's speech per trial.
@@ -28,6 +29,7 @@ import statistics
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -40,19 +42,27 @@ from kasparctl.sim.demo import DemoOptions, DemoResult, DemoRig, build, demo_con
 from kasparctl.sim.teacher import Messiness
 
 RATES = Messiness(p_hold=0.20, p_double=0.10, p_both=0.10, p_early=0.20)
-MODES = ("device", "keyfob")
+MODES = ("device", "keypad", "keyfob")
+KEYPAD = {"KEY_F1": "next", "KEY_F2": "pause", "KEY_F3": "undo", "KEY_F4": "stop"}
 
 
 def config_for(mode: str) -> Config:
-    """The demo robot with the researcher's commands on their device, or on the keyfob."""
+    """The demo robot with the researcher's commands on their device, a keypad's extra
+    keys, or the children's keyfob."""
     config = demo_config()
+    keyfob = msgspec.structs.replace(config.keyfob, commands=KEYPAD if mode == "keypad" else {})
     return msgspec.structs.replace(
-        config, researcher=msgspec.structs.replace(config.researcher, source=mode)
+        config,
+        keyfob=keyfob,
+        researcher=msgspec.structs.replace(config.researcher, source=mode),
     )
 
 
-def one_game(config: Config, seed: int, root: Path, messiness: Messiness) -> tuple[DemoResult, int]:
-    """A whole game; its result and how many answers the children gave (trials + poses)."""
+def one_game(
+    config: Config, seed: int, root: Path, messiness: Messiness
+) -> tuple[DemoResult, int, Counter[str]]:
+    """A whole game; its result, how many answers the children gave (trials + poses) and
+    how they pressed."""
     options = DemoOptions(
         state_dir=root / str(seed), seed=seed, messiness=messiness, out=io.StringIO()
     )
@@ -63,8 +73,16 @@ def one_game(config: Config, seed: int, root: Path, messiness: Messiness) -> tup
 
     result, rig = simtime.run(main(), virtual=True)
     assert rig.children is not None
-    shown = sum(press.bag is not None for press in rig.children.presses)
-    return result, result.trials + shown
+    presses = rig.children.presses
+    shown = sum(press.bag is not None for press in presses)
+    kinds: Counter[str] = Counter()
+    for press in presses:
+        words = press.action.split()
+        kinds[words[0] if len(words) > 1 else "press"] += 1
+        kinds["early"] += press.early
+        if words[0] in ("hold", "chord") and float(words[2]) >= config.researcher.hold_s:
+            kinds[f"{words[0]} past the researcher's hold"] += 1
+    return result, result.trials + shown, kinds
 
 
 def run_mode(mode: str, answers_wanted: int, messiness: Messiness = RATES) -> dict[str, Any]:
@@ -81,11 +99,13 @@ def run_mode(mode: str, answers_wanted: int, messiness: Messiness = RATES) -> di
     }
     gaps: list[float] = []
     speech: list[float] = []
+    kinds: Counter[str] = Counter()
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="kaspar-messy-") as scratch:
         seed = 0
         while totals["answers"] < answers_wanted:
-            result, answers = one_game(config, seed, Path(scratch), messiness)
+            result, answers, pressed = one_game(config, seed, Path(scratch), messiness)
+            kinds += pressed
             totals["games"] += 1
             totals["answers"] += answers
             totals["trials"] += result.trials
@@ -99,6 +119,7 @@ def run_mode(mode: str, answers_wanted: int, messiness: Messiness = RATES) -> di
             seed += 1
     totals["answer_to_next_question_s_median"] = round(statistics.median(gaps), 2)
     totals["speech_s_per_trial_mean"] = round(statistics.mean(speech), 2)
+    totals["presses"] = dict(sorted(kinds.items()))
     totals["wall_s"] = round(time.perf_counter() - started, 1)
     return totals
 
@@ -128,7 +149,8 @@ def main() -> int:
                 f"{totals['answers_lost']} answers not taken, {totals['unfinished']} "
                 f"unfinished (targets 0, 0, 0: {'met' if ok else 'MISSED'}); answer to next "
                 f"question {totals['answer_to_next_question_s_median']} s (median of games), "
-                f"speech {totals['speech_s_per_trial_mean']} s a trial; {totals['wall_s']} s"
+                f"speech {totals['speech_s_per_trial_mean']} s a trial; {totals['wall_s']} s\n"
+                f"        presses: {totals['presses']}"
             )
     return 1 if missed else 0
 

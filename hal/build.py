@@ -56,17 +56,26 @@ def build(
     own_device = researcher.source == "device"
     built_researcher: KeyfobInput | None = None
     if sim or keyfob.backend == "sim" or sim_keys_fifo is not None:
-        from hal.keyfob.sim import FifoKeyfob, SimKeyfob, TerminalKeyfob
+        from hal.keyfob.sim import FifoKeyfob, ResearcherKeys, SimKeyfob, TerminalKeyfob
 
-        # The researcher's keys typed beside the children's reach a simulated device.
+        # The researcher's keys typed beside the children's reach a simulated device, or
+        # the keypad's own command keys; on one keyfob they are its holds.
         twin = SimKeyfob(clock, commands=sorted(set(researcher.keys.values())))
         if own_device:
             built_researcher = twin
         device = twin if own_device else None
+        keypad = sorted(set(keyfob.commands.values())) if researcher.source == "keypad" else []
         if sim_keys_fifo is not None:
-            built_keyfob: KeyfobInput = FifoKeyfob(sim_keys_fifo, clock, researcher=device)
+            fifo = FifoKeyfob(sim_keys_fifo, clock, researcher=device, commands=keypad)
+            built_keyfob: KeyfobInput = fifo
+            if keypad:
+                fifo.researcher = ResearcherKeys(fifo, fifo)
         else:
-            built_keyfob = TerminalKeyfob(clock, stream=sim_keys or sys.stdin, researcher=device)
+            stream = sim_keys or sys.stdin
+            terminal = TerminalKeyfob(clock, stream=stream, researcher=device, commands=keypad)
+            built_keyfob = terminal
+            if keypad:
+                terminal.researcher = ResearcherKeys(terminal, terminal)
     else:
         from hal.keyfob.reader import Keyfob
 

@@ -51,7 +51,10 @@ def with_plan(config: Config, **changes: Any) -> Config:
 # -- presses are answers ---------------------------------------------------------------
 
 
-@pytest.mark.parametrize("source", ["device", "keyfob"])
+KEYPAD = {"KEY_F1": "next", "KEY_F2": "pause", "KEY_F3": "undo", "KEY_F4": "stop"}
+
+
+@pytest.mark.parametrize("source", ["device", "keypad", "keyfob"])
 def test_messy_children_never_give_a_command_and_every_answer_is_taken(
     tmp_path: Path, source: str
 ) -> None:
@@ -59,6 +62,9 @@ def test_messy_children_never_give_a_command_and_every_answer_is_taken(
     steps: no command a child started, every answer taken as meant, every game finished.
     (bench/bench_messy_children.py runs 10,000 answers per mode.)"""
     config = with_researcher(config_for(), source=source)
+    if source == "keypad":
+        keyfob = msgspec.structs.replace(config.keyfob, commands=KEYPAD)
+        config = msgspec.structs.replace(config, keyfob=keyfob)
     for seed in range(6):
         result, rig, _ = play(tmp_path / str(seed), config=config, seed=seed, messiness=MESSY)
         assert result.finished, seed
@@ -70,6 +76,9 @@ def test_messy_children_never_give_a_command_and_every_answer_is_taken(
         # What the presses became is recorded, never acted on.
         kinds = {r.get("gesture") for r in records if r["kind"] == "press" and r.get("extra")}
         assert kinds & {"long green", "long red", "both", None}
+        # The researcher's commands came from where the configuration says.
+        where = {"device": "researcher", "keypad": "keypad", "keyfob": "keyfob"}[source]
+        assert {r["source"] for r in records if r["kind"] == "command"} == {where}
 
 
 def test_on_one_keyfob_a_childs_long_hold_is_an_answer_and_the_researchers_is_a_command(

@@ -224,10 +224,16 @@ def assemble(
     researcher = None
     if config.researcher.source == "device":
         researcher = SimKeyfob(clock, commands=sorted(set(config.researcher.keys.values())))
+    # A keypad's command keys are keys of the children's keypad.
+    keypad = (
+        sorted(set(config.keyfob.commands.values()))
+        if config.researcher.source == "keypad"
+        else []
+    )
     if options.interactive:
-        keyfob: SimKeyfob = TerminalKeyfob(clock, researcher=researcher)
+        keyfob: SimKeyfob = TerminalKeyfob(clock, researcher=researcher, commands=keypad)
     else:
-        keyfob = SimKeyfob(clock)
+        keyfob = SimKeyfob(clock, commands=keypad)
     book = load_phrasebook(config.language, config.phrases_dir)
     picker = PhrasePicker(book, np.random.default_rng([options.seed, 2]))
     plan = config.sessions[0] if config.sessions else SessionPlan(group="demo")
@@ -280,6 +286,9 @@ async def researcher_command(
     children's `keyfob` (one keyfob, or the device away)."""
     if device is not None and device.connected:
         await device.perform(f"command {name}")
+        return
+    if config.researcher.source == "keypad":
+        await keyfob.perform(f"command {name}")  # a command key of the children's keypad
         return
     gestures = {command: gesture for gesture, command in config.game.commands.items()}
     gesture = gestures.get(name, COMMAND_GESTURES[name])
