@@ -78,6 +78,12 @@ class SessionData:
         return str(self.meta.get("variant", ""))
 
     @property
+    def script(self) -> tuple[str, int]:
+        """The uncertainty script and its version; ("varied", 0) for a session planned
+        before scripts existed (the five bands, with the words of then)."""
+        return str(self.meta.get("script", "varied")), int(self.meta.get("script_version", 0))
+
+    @property
     def identity(self) -> dict[str, Any]:
         """The columns that name a session and its condition, first in every table of it."""
         return {
