@@ -269,6 +269,7 @@ class Game:
         self.researcher = config.researcher
         self.stopped_waiting = stopped
         self.script = script(config.game.script)
+        self._use_script(self.script)  # the configured script's words, until a session opens
         # A request to show a bag was asked, and one shown far from before is asked again.
         self._requests_in_step = 0
         initial = "idle"

@@ -295,12 +295,17 @@ class Daemon:
             self._pending_faults.append(HardwareFault(FaultSource.SOFTWARE, detail))
         self._playing = None
         game.flush_unwritten()
-        # Not over with the game: the keyfob still away (its report was this game's),
-        # the voice or the disk until a line is heard or a record written.
+        # Not over with the game: the keyfob or the researcher's device still away (their
+        # reports were this game's), the voice or the disk until a line is heard or a
+        # record written.
+        carried = (
+            FaultSource.KEYFOB,
+            FaultSource.RESEARCHER,
+            FaultSource.VOICE,
+            FaultSource.STORAGE,
+        )
         self._carried_problems = {
-            kind: detail
-            for kind, detail in game.problems.items()
-            if kind in (FaultSource.KEYFOB, FaultSource.VOICE, FaultSource.STORAGE)
+            kind: detail for kind, detail in game.problems.items() if kind in carried
         }
         if game.session is not None:
             game.session.close()
