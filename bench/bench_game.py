@@ -107,7 +107,7 @@ def stop_to_rest_s(games: int, state_root: Path) -> list[float]:
         async def researcher() -> None:
             await asked.wait()
             await asyncio.sleep(0.5)  # mid-reaction: Kaspar is talking and may be moving
-            await rig.keyfob.perform("both")
+            await rig.command("stop")
 
         stopper = asyncio.create_task(researcher())
         loop = asyncio.get_running_loop()

@@ -1,4 +1,4 @@
-"""Build the three hardware parts from their settings: the real drivers or the twins."""
+"""Build the hardware parts from their settings: the real drivers or the twins."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import msgspec
 from hal import Hardware
 from hal.clock import Clock
 from hal.keyfob.api import KeyfobInput
-from hal.keyfob.settings import KeyfobSettings
+from hal.keyfob.settings import KeyfobSettings, ResearcherSettings
 from hal.servos.api import ServoApi
 from hal.servos.settings import ServoSettings
 from hal.voice.api import VoiceOutput
@@ -34,26 +34,59 @@ def build(
     voice: VoiceSettings,
     clock: Clock,
     *,
+    researcher: ResearcherSettings | None = None,
     sim: bool = False,
     sim_keys: TextIO | None = None,
+    sim_keys_fifo: str | None = None,
     sim_lines: TextIO | None = None,
 ) -> Hardware:
     """Each part as its `backend` says, or every part simulated when `sim`.
 
-    A simulated keyfob reads keys from `sim_keys` (standard input by default:
-    g green, r red, G long green, ...); a simulated voice prints to `sim_lines`.
+    The researcher's own device is built when `researcher.source` is "device" (the
+    default table when none is given). A simulated keyfob reads keys from `sim_keys`
+    (standard input by default), or from the fifo `sim_keys_fifo` (which may come
+    late): g and r are the children's green and red, G, R, d and b the researcher's
+    next, pause, undo and stop (docs/keyfob-and-voice.md). A simulated voice prints
+    to `sim_lines`.
     """
+    researcher = researcher if researcher is not None else ResearcherSettings()
     if sim:
         servos = msgspec.structs.replace(servos, backend="sim")
     built_servos = build_servos(servos, clock)
-    if sim or keyfob.backend == "sim":
-        from hal.keyfob.sim import TerminalKeyfob
+    own_device = researcher.source == "device"
+    built_researcher: KeyfobInput | None = None
+    if sim or keyfob.backend == "sim" or sim_keys_fifo is not None:
+        from hal.keyfob.sim import FifoKeyfob, ResearcherKeys, SimKeyfob, TerminalKeyfob
 
-        built_keyfob: KeyfobInput = TerminalKeyfob(clock, stream=sim_keys or sys.stdin)
+        # The researcher's keys typed beside the children's reach a simulated device, or
+        # the keypad's own command keys; on one keyfob they are its holds.
+        twin = SimKeyfob(clock, commands=sorted(set(researcher.keys.values())))
+        if own_device:
+            built_researcher = twin
+        device = twin if own_device else None
+        keypad = sorted(set(keyfob.commands.values())) if researcher.source == "keypad" else []
+        if sim_keys_fifo is not None:
+            fifo = FifoKeyfob(sim_keys_fifo, clock, researcher=device, commands=keypad)
+            built_keyfob: KeyfobInput = fifo
+            if keypad:
+                fifo.researcher = ResearcherKeys(fifo, fifo)
+        else:
+            stream = sim_keys or sys.stdin
+            terminal = TerminalKeyfob(clock, stream=stream, researcher=device, commands=keypad)
+            built_keyfob = terminal
+            if keypad:
+                terminal.researcher = ResearcherKeys(terminal, terminal)
     else:
         from hal.keyfob.reader import Keyfob
 
         built_keyfob = Keyfob(keyfob, clock)
+        if own_device:
+            if researcher.backend == "sim":
+                from hal.keyfob.sim import SimKeyfob
+
+                built_researcher = SimKeyfob(clock, commands=sorted(set(researcher.keys.values())))
+            else:
+                built_researcher = Keyfob(researcher, clock, role="researcher")
     if sim or voice.backend == "sim":
         from hal.voice.sim import SimVoice
 
@@ -62,4 +95,4 @@ def build(
         from hal.voice.speaker import Voice
 
         built_voice = Voice(voice, clock)
-    return Hardware(built_servos, built_keyfob, built_voice)
+    return Hardware(built_servos, built_keyfob, built_voice, built_researcher)

@@ -20,7 +20,7 @@ from typing import Annotated, Any, Literal
 
 import msgspec
 
-from hal.keyfob.settings import KeyfobSettings
+from hal.keyfob.settings import KeyfobSettings, ResearcherSettings
 from hal.servos.settings import ServoSettings
 from hal.voice.settings import VoiceSettings
 from kasparctl.learning.learner import LearnerError, LearnerParams
@@ -178,23 +178,40 @@ class GameSettings(_Settings, frozen=True):
     # Small expressive poses, joint -> degrees, held briefly then undone.
     happy_pose: dict[str, float] = {}
     sad_pose: dict[str, float] = {}
-    # Seconds of silence after a question before each prompt: first, second,
-    # then the line that asks the researcher for help.
+    # Seconds of silence after a question (or a request to show a bag) before each
+    # prompt: first, second, then the line that asks the researcher for help.
     prompt_after_s: Annotated[
         tuple[Annotated[float, msgspec.Meta(ge=0.5, le=600.0, extra={"unit": "s"})], ...],
         msgspec.Meta(min_length=1, extra={"item": "delay"}),
     ] = (8.0, 8.0, 12.0)
+    # Steps 1 and 3 wait for the researcher's "next": after this long Kaspar says once
+    # that it is ready (the children are busy with the bags meanwhile).
+    step_prompt_after_s: Annotated[
+        float, msgspec.Meta(ge=5.0, le=3600.0, extra={"unit": "s"})
+    ] = 90.0
     # A press this soon after an answer is recorded as an extra, not an answer.
     extra_press_gap_s: Annotated[float, msgspec.Meta(ge=0.0, le=10.0, extra={"unit": "s"})] = 1.0
-    # Researcher gestures on the keyfob and the commands they give.
+    # The researcher's gestures when their commands are on the children's keyfob
+    # ([researcher] source = "keyfob", or while their own device is away): holds of
+    # researcher.hold_s, never a double press (children double-tap).
     commands: dict[str, str] = msgspec.field(
-        default_factory=lambda: {
-            "long green": "next",
-            "long red": "pause",
-            "double red": "undo",
-            "both": "stop",
-        }
+        default_factory=lambda: {"long green": "next", "long red": "pause", "both": "stop"}
     )
+    # How Kaspar says how sure it is: "paper" (the paper's three levels, one fixed
+    # line each, and every line in its first wording) or "varied" (five levels,
+    # wordings varied). A session's plan may choose its own.
+    script: Literal["paper", "varied"] = "paper"
+    # Kaspar's "I'm listening" pose, held from the end of a question until the answer
+    # (joint -> degrees; or the poses file's "listening" pose). A clip for the phrase
+    # key "cue.listening" in [voice.clips] plays a short sound then too.
+    listening_pose: dict[str, float] = {}
+    # Pilot: how each location is said in a sentence ("in the box", "on the shelf");
+    # a location without one is said with the phrase book's names.where.
+    location_phrases: dict[str, Name] = {}
+    # Step 2: a bag shown further than this from where it was shown before (in any
+    # joint, degrees) is asked for once more; 0 never asks. Kaspar points with the
+    # median of every pose shown for the bag.
+    pose_check_deg: Annotated[float, msgspec.Meta(ge=0.0, le=360.0, extra={"unit": "deg"})] = 20.0
 
     @property
     def targets(self) -> tuple[str, ...]:
@@ -220,7 +237,11 @@ class SessionPlan(_Settings, frozen=True):
     """A session planned beforehand: nobody can type during one."""
 
     group: Annotated[str, msgspec.Meta(pattern=r"\S", extra={"expected": "a group code"})]
+    # The group's session: 1 for its first, 2 for the one more it asked for...
+    number: Annotated[int, msgspec.Meta(ge=1, le=99)] = 1
     profile: str = "paper"
+    # The uncertainty script of this session (game.script when not given).
+    script: Literal["paper", "varied"] | None = None
     speak_uncertainty: bool = True
     # First names are optional; without them Kaspar says "child one", "child two"...
     children: Annotated[
@@ -268,6 +289,8 @@ class Config(_Settings, frozen=True):
     sessions: tuple[SessionPlan, ...] = ()
     servos: ServoSettings = ServoSettings()
     keyfob: KeyfobSettings = KeyfobSettings()
+    # Where the researcher's commands come from (their own device by default).
+    researcher: ResearcherSettings = ResearcherSettings()
     voice: VoiceSettings = VoiceSettings()
     daemon: DaemonSettings = DaemonSettings()
 
@@ -286,6 +309,10 @@ class Config(_Settings, frozen=True):
         if plan.participants:
             return len(plan.participants)
         return plan.group_size or self.game.children_per_group
+
+    def script(self, plan: SessionPlan) -> str:
+        """The uncertainty script a planned session uses: its own, else the game's."""
+        return plan.script or self.game.script
 
 
 def load_config(path: str | Path, *, poses: bool = True, playable: bool = False) -> Config:
@@ -390,6 +417,7 @@ def _resolve_paths(config: Config, base_dir: Path) -> Config:
 REST_POSE = "rest"
 HAPPY_POSE = "happy"
 SAD_POSE = "sad"
+LISTENING_POSE = "listening"
 
 
 def read_poses(path: str | Path) -> dict[str, dict[str, float]]:
@@ -448,9 +476,9 @@ def check_pose(
 def apply_poses_file(config: Config, config_source: str) -> Config:
     """The configuration with the poses file's poses in the game and the joints' rest.
 
-    Every pose is checked against the joints' ranges. "happy" and "sad" become
-    game.happy_pose and game.sad_pose, a pose named like a pilot location
-    game.poses[location], and "rest" the rest_deg of the joints it names. A pose
+    Every pose is checked against the joints' ranges. "happy", "sad" and "listening"
+    become game.happy_pose, game.sad_pose and game.listening_pose, a pose named like a
+    pilot location game.poses[location], and "rest" the rest_deg of the joints it names. A pose
     also written inline in [game] is refused, as is a pilot whose locations are
     only partly posed. Errors name the poses file, the pose and the joint.
     """
@@ -461,7 +489,8 @@ def apply_poses_file(config: Config, config_source: str) -> Config:
         check_pose(pose, name, config.servos, source)
     game = config.game
     changes: dict[str, Any] = {}
-    for name, field in ((HAPPY_POSE, "happy_pose"), (SAD_POSE, "sad_pose")):
+    named = ((HAPPY_POSE, "happy_pose"), (SAD_POSE, "sad_pose"), (LISTENING_POSE, "listening_pose"))
+    for name, field in named:
         if name in poses:
             if getattr(game, field):
                 raise ConfigError(config_source, f"game.{field}",
@@ -696,6 +725,8 @@ def _validate(config: Config, source: str) -> None:
     _check_game_controls(config.game, fail)
     _check_game_servos(config, fail)
     _check_sessions(config, fail)
+    _check_researcher(config, fail)
+    _check_interaction(config.game, fail)
 
 
 def _check_learner(learner: LearnerSettings, fail: _Fail) -> None:
@@ -793,12 +824,17 @@ def _check_pointing_group(config: Config, fail: _Fail) -> None:
 
 
 def _check_sessions(config: Config, fail: _Fail) -> None:
-    seen_groups: set[str] = set()
+    seen: set[tuple[str, int]] = set()
     for index, plan in enumerate(config.sessions):
         where = f"sessions[{index}]"
-        if plan.group in seen_groups:
-            fail(f"{where}.group", f"group code {plan.group!r} is planned twice")
-        seen_groups.add(plan.group)
+        if (plan.group, plan.number) in seen:
+            # A group's second session is numbered: a code planned twice is a typo.
+            fail(
+                f"{where}.group",
+                f"group code {plan.group!r} is planned twice as session {plan.number}; "
+                "give a group's next session number = 2, 3...",
+            )
+        seen.add((plan.group, plan.number))
         _check_plan(plan, where, config, fail)
 
 
@@ -856,6 +892,47 @@ def _check_game_controls(
             "game.poses",
             "only the pilot variant has configured poses; step 2 teaches the bags' poses",
         )
+
+
+def _check_researcher(config: Config, fail: _Fail) -> None:
+    """The researcher's commands: each a command, the ones a session needs all there."""
+    researcher = config.researcher
+    if researcher.source == "device":
+        keys, where = researcher.keys, "researcher.keys"
+    elif researcher.source == "keypad":
+        keys, where = config.keyfob.commands, "keyfob.commands"
+    else:
+        keys, where = {}, ""
+    for key, command in keys.items():
+        if command not in tuple(Command):
+            fail(f"{where}.{key}", f"expected one of {', '.join(Command)}, found {command!r}")
+    if where:
+        for command in REQUIRED_COMMANDS:
+            if command not in keys.values():
+                fail(
+                    where,
+                    f"expected a key for {command.value!r} (researcher.source = "
+                    f"{researcher.source!r}): a session cannot be run without it",
+                )
+    # game.commands are holds on the children's keyfob: never what children do.
+    for gesture in config.game.commands:
+        if gesture.startswith("double "):
+            fail(
+                f"game.commands.{gesture}",
+                "expected long green, long red or both: a double press is what children "
+                "do, so it is an answer, never a command",
+            )
+
+
+def _check_interaction(game: GameSettings, fail: _Fail) -> None:
+    """The pilot's location phrases name locations."""
+    for location in game.location_phrases:
+        if location not in game.locations:
+            fail(
+                f"game.location_phrases.{location}",
+                f"expected one of game.locations ({', '.join(game.locations) or 'none'}), "
+                f"found {location!r}",
+            )
 
 
 def _check_distinct(names: tuple[str, ...], key: str, fail: _Fail) -> None:

@@ -21,7 +21,6 @@ class Command(enum.StrEnum):
 # Commands a session cannot be run without: every configuration must map a gesture to each.
 REQUIRED_COMMANDS = (Command.NEXT, Command.PAUSE, Command.STOP)
 
-# What Kaspar calls each child of a group whose plan gives no first names; a group
-# has at most as many children as there are words here.
-CHILD_WORDS = ("child one", "child two", "child three", "child four", "child five", "child six")
-MAX_CHILDREN = len(CHILD_WORDS)
+# The most children a group may have (the paper's groups had two or three). A child
+# without a first name is called by the phrase book's names.child ("child 2").
+MAX_CHILDREN = 6

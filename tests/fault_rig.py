@@ -3,7 +3,8 @@
 The Daemon itself (its session loop, its event log, its STATUS=, its lock) plays
 on a rig of simulated servos, keyfob and voice, with honest simulated children
 who answer Kaspar's questions and show it where the bags are; the test is the
-researcher (long green, long red, both) and the one who breaks things. Faults are
+researcher (their own device's next, pause and stop, named by the keyfob gestures
+that once gave them: long green, long red, both) and the one who breaks things. Faults are
 injected where the robot has them: in the servos (SimServos.inject_fault), the
 keyfob (lost and back), the voice (SimVoice.inject_fault: a player that fails),
 the phrase code (a line that raises: a bug), and the disk (every write refused
@@ -32,7 +33,7 @@ import pytest
 
 from hal import Hardware
 from hal.clock import LoopClock
-from hal.keyfob.sim import SimKeyfob
+from hal.keyfob.sim import COMMAND_GESTURES, SimKeyfob
 from hal.servos.sim import SimServos
 from hal.voice.sim import SimVoice
 from kasparctl.config import load_config
@@ -177,6 +178,7 @@ class FaultRig:
     daemon: Daemon
     servos: SimServos
     keyfob: SimKeyfob
+    researcher: SimKeyfob
     voice: SimVoice
     notifier: RecordedNotifier
     lines: io.StringIO
@@ -283,7 +285,16 @@ class FaultRig:
             self.voice.on_line = None
 
     async def press(self, action: str) -> None:
-        await self.keyfob.perform(action)
+        """A child's key ("green", "red"), the keyfob lost or back, or the researcher's
+        command by its old gesture's name ("long green" is next, on their own device)."""
+        command = RESEARCHER_GESTURES.get(action)
+        if command is not None:
+            await self.researcher.perform(f"command {command}")
+        else:
+            await self.keyfob.perform(action)
+
+
+RESEARCHER_GESTURES = {gesture: command for command, gesture in COMMAND_GESTURES.items()}
 
 
 async def _started(rig: FaultRig) -> None:
@@ -297,9 +308,14 @@ def run_daemon(
     scenario: Callable[[FaultRig], Awaitable[None]],
     variant: str = "names",
     edit: Callable[[str], str] | None = None,
+    *,
+    config: Path | None = None,
 ) -> FaultRig:
-    """The daemon on the rig in simulated time, `scenario` beside it; stopped after it."""
-    config_path = write_config(tmp_path, variant, edit)
+    """The daemon on the rig in simulated time, `scenario` beside it; stopped after it.
+
+    `config` replaces the rig's own configuration (write_config's, edited by `edit`).
+    """
+    config_path = config if config is not None else write_config(tmp_path, variant, edit)
     state_dir = tmp_path / "state"
     log = io.StringIO()
     configure_logging("debug", "json", stream=log)
@@ -312,6 +328,7 @@ def run_daemon(
         lines = io.StringIO()
         servos = SimServos(config.servos, clock)
         keyfob = SimKeyfob(clock)
+        researcher = SimKeyfob(clock, commands=("next", "pause", "undo", "stop"))
         voice = SimVoice(lines, clock, timeout=config.voice.timeout)
         answers = [TOYS.index(toy) for toy in config.sessions[0].answer_key]
         children = Children(keyfob, answers)
@@ -320,10 +337,10 @@ def run_daemon(
         daemon = Daemon(
             DaemonOptions(str(config_path), sim=True, state_dir=str(state_dir)),
             notifier,
-            hardware=Hardware(servos, keyfob, voice),
+            hardware=Hardware(servos, keyfob, voice, researcher),
         )
-        rig = FaultRig(daemon, servos, keyfob, voice, notifier, lines, log, breakage, state_dir,
-                       children, changed=changed)  # fmt: skip
+        rig = FaultRig(daemon, servos, keyfob, researcher, voice, notifier, lines, log, breakage,
+                       state_dir, children, changed=changed)  # fmt: skip
         daemon.listeners += [rig._listener, children]
         result.append(rig)
         running = asyncio.create_task(daemon.run())

@@ -104,7 +104,7 @@ def cut_after_trial(session_dir: Path, trial: int) -> None:
 
 async def undo_second_answer(rig: DemoRig) -> None:
     await on_event(rig, "question", lambda info: info["trial"] == 2)
-    await rig.keyfob.perform("double red")
+    await rig.command("undo")
 
 
 async def fault_then_stop(rig: DemoRig) -> None:
@@ -118,7 +118,7 @@ async def fault_then_stop(rig: DemoRig) -> None:
     rig.servos.inject_fault("head_yaw", FaultKind.SILENT)
     await fault
     await asyncio.sleep(5)
-    await rig.keyfob.perform("both")
+    await rig.command("stop")
 
 
 def make_study(root: Path) -> Study:

@@ -51,10 +51,10 @@ def test_ready_status_watchdog_and_a_clean_stop(daemon: RunningService) -> None:
     notify.wait_for("READY=1")
     notify.wait_for("WATCHDOG=1")  # the running loop pings (its pace: see the simulated test)
 
-    # The researcher's long green starts a session: Kaspar confirms it out loud.
+    # The researcher's "next" (G) starts a session: Kaspar greets the children first.
     pressed = notify.mark()
     daemon.press("G")
-    daemon.stderr.wait_for(lambda line: spoken(line, PHRASES["confirm"]["start"]))
+    daemon.stderr.wait_for(lambda line: spoken(line, PHRASES["session"]["greeting"]))
 
     # A blocked loop sends nothing: that is what lets systemd restart a hung service.
     # (Blocked while Kaspar speaks, the line's timer runs out meanwhile: no time lost.)

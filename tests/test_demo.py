@@ -58,3 +58,19 @@ def test_bad_options_are_named(capsys, tmp_path: Path) -> None:
     bad.write_text("[game]\nvariant = 'maze'\n")
     assert main(["demo", "--config", str(bad)]) == 1
     assert "game.variant: expected one of" in capsys.readouterr().err
+
+
+def test_messy_children_give_no_command_and_the_summary_says_so(capsys, tmp_path: Path) -> None:
+    _, summary = demo(
+        capsys, tmp_path, "--seed", "4",
+        "--p-hold", "0.3", "--p-double", "0.2", "--p-both", "0.2", "--p-early", "0.3",
+    )  # fmt: skip
+    assert summary["finished"] is True
+    assert summary["accidental_commands"] == 0 and summary["answers_lost"] == 0
+    assert 0 < summary["answer_to_next_question_s"] <= 10
+    assert 0 < summary["speech_s_per_trial"] < 10
+
+
+def test_a_messy_probability_outside_zero_to_one_is_refused(capsys) -> None:
+    assert main(["demo", "--fast", "--p-double", "1.5"]) == 1
+    assert "expected a probability in [0, 1], found 1.5" in capsys.readouterr().err

@@ -20,7 +20,7 @@ from kasparctl.game.session import RECORDS_FILE
 from kasparctl.game.stages import STATES, TRANSITIONS
 from kasparctl.sim import simtime
 from kasparctl.sim.demo import DemoOptions, DemoResult, DemoRig, build, demo_config, with_variant
-from kasparctl.sim.teacher import Teacher
+from kasparctl.sim.teacher import Messiness, Teacher
 
 
 def config_for(variant: str = "names", **game_changes: Any) -> Config:
@@ -47,10 +47,17 @@ def play(
     teacher: Teacher | None = None,
     scenario: Callable[[DemoRig], Coroutine[Any, Any, None]] | None = None,
     children_answers: list[int] | None = None,
+    messiness: Messiness | None = None,
 ) -> tuple[DemoResult, DemoRig, str]:
     """One game in simulated time; `scenario` runs beside it, acting on the rig."""
     out = io.StringIO()
-    options = DemoOptions(state_dir=tmp_path, seed=seed, teacher=teacher or Teacher(), out=out)
+    options = DemoOptions(
+        state_dir=tmp_path,
+        seed=seed,
+        teacher=teacher or Teacher(),
+        messiness=messiness or Messiness(),
+        out=out,
+    )
 
     async def main() -> tuple[DemoResult, DemoRig]:
         rig = build(config or config_for(), options, children_answers)
@@ -90,6 +97,10 @@ def test_names_game_runs_all_five_steps(tmp_path: Path) -> None:
     assert len(poses) == 6 * 3  # every bag, once per child of the group
     assert [p["round"] for p in poses] == [0] * 6 + [1] * 6 + [2] * 6
     assert set(poses[0]["pose"]) == {"right_shoulder_pitch", "right_shoulder_roll", "right_elbow"}
+    # Every child moves the arm once and presses once, named by Kaspar.
+    jobs = [(p["mover"], p["presser"]) for p in poses[::6]]
+    assert jobs == [("child 1", "child 2"), ("child 2", "child 3"), ("child 3", "child 1")]
+    assert all(p["rule"] == "median" for p in poses)
     assert_trials_whole(records)
     trials = trials_of(records)
     assert len(trials) == result.trials
@@ -103,10 +114,13 @@ def test_names_game_runs_all_five_steps(tmp_path: Path) -> None:
         offered = set(trial["candidates"])
         assert not offered & set(learned[: trial["target_index"]])
         assert sum(trial["probabilities"]) == pytest.approx(1.0)
-    # The last round's pose is the one Kaspar points with.
+    # Kaspar points with the median of the rounds' poses.
     assert "Kaspar points at bag 1" in out
     assert rig.game.session_state is not None
-    assert rig.game.session_state.poses["bag 1"] == poses[12]["pose"]
+    shown = [p["pose"] for p in poses if p["bag"] == 0]
+    assert rig.game.session_state.poses["bag 1"] == {
+        joint: sorted(pose[joint] for pose in shown)[1] for joint in shown[0]
+    }
 
 
 def test_trial_records_carry_everything_the_researchers_need(tmp_path: Path) -> None:
@@ -138,7 +152,7 @@ def test_trial_records_carry_everything_the_researchers_need(tmp_path: Path) -> 
         assert key in trial, key
     assert trial["entropy"] == pytest.approx(2.584962500721156)
     assert trial["band"] == "no_idea"
-    assert trial["child"] == "child one"
+    assert trial["child"] == "child 1"
     assert trial["reaction_time"] > 0
     assert trial["feedback_right"] is True  # honest children
     assert trial["q_after"][trial["choice_index"]] == pytest.approx(0.6 * trial["reward"])
@@ -194,7 +208,7 @@ def test_nobody_answers_then_prompts(tmp_path: Path) -> None:
     prompts = [r for r in records if r["kind"] == "prompt"]
     # Each question waits for a prompt before the silent child answers.
     assert len(prompts) == result.trials
-    assert {p["line"] for p in prompts} == {"prompt.nobody_first"}
+    assert {p["line"] for p in prompts} == {"instructions.buttons"}
     assert result.finished
 
 
@@ -203,14 +217,14 @@ def test_prompts_go_on_to_the_researcher(tmp_path: Path) -> None:
         assert rig.children is not None
         rig.game.listeners.remove(rig.children)  # the children do not answer
         prompted = on_event(rig, "prompt", lambda info: info["line"] == "prompt.ask_researcher")
-        await rig.keyfob.perform("long green")
+        await rig.command("next")
         await prompted
         await asyncio.sleep(60)
-        await rig.keyfob.perform("both")  # the researcher ends the session
+        await rig.command("stop")  # the researcher ends the session
 
     result, _, _ = play(tmp_path, config=config_for("pilot"), scenario=scenario)
     lines = [r["line"] for r in records_of(result) if r["kind"] == "prompt"]
-    assert lines == ["prompt.nobody_first", "prompt.nobody_second", "prompt.ask_researcher"]
+    assert lines == ["instructions.buttons", "prompt.answer_again", "prompt.ask_researcher"]
     assert result.final_state == "stopped" and result.trials == 0
 
 
@@ -230,7 +244,7 @@ def test_an_extra_press_right_after_an_answer_is_recorded_as_extra(tmp_path: Pat
 def test_undo_restores_the_learner_row_and_keeps_trial_numbers(tmp_path: Path) -> None:
     async def scenario(rig: DemoRig) -> None:
         await on_event(rig, "question", lambda info: info["trial"] == 2)
-        await rig.keyfob.perform("double red")
+        await rig.command("undo")
 
     result, _, _ = play(tmp_path, config=config_for("pilot"), scenario=scenario, seed=3)
     records = records_of(result)
@@ -250,9 +264,9 @@ def test_pause_mid_question_and_resume_asks_the_same_question(tmp_path: Path) ->
     async def scenario(rig: DemoRig) -> None:
         await on_event(rig, "point", lambda info: info["target"] == "shelf")
         await asyncio.sleep(1.5)  # pointing done, saying how sure it is
-        await rig.keyfob.perform("long red")
+        await rig.command("pause")
         await asyncio.sleep(30)
-        await rig.keyfob.perform("long red")
+        await rig.command("pause")
 
     plain, _, _ = play(tmp_path / "plain", config=config_for("pilot"), seed=5)
     paused, _, out = play(
@@ -267,8 +281,8 @@ def test_pause_mid_question_and_resume_asks_the_same_question(tmp_path: Path) ->
     # Kaspar stopped mid-line: the guess it was about to make came only after the resume.
     lines = out.splitlines()
     pointed = next(i for i, line in enumerate(lines) if "points at shelf" in line)
-    assert "Kaspar: " in lines[pointed + 1]  # how sure it is, cut off
-    assert "(the game is paused)" in lines[pointed + 2]
+    assert "Kaspar: " in lines[pointed - 1]  # how sure it is, said as it points, cut off
+    assert "(the game is paused)" in lines[pointed + 1]
     assert paused.finished
 
 
@@ -278,28 +292,27 @@ def test_every_command_where_it_applies_and_ignored_elsewhere(tmp_path: Path) ->
     async def researcher(rig: DemoRig) -> None:
         assert rig.children is not None
         rig.game.listeners.remove(rig.children)
-        keyfob = rig.keyfob
 
-        async def gesture(action: str, then: str | None = None) -> None:
-            """One gesture; with `then`, wait until the game has entered that stage."""
+        async def gesture(command: str, then: str | None = None) -> None:
+            """One command; with `then`, wait until the game has entered that stage."""
             entered = on_event(rig, "state", lambda info: info["state"] == then)
-            await keyfob.perform(action)
+            await rig.command(command)
             if then is not None:
                 await entered
 
         await on_event(rig, "waiting_for_researcher", lambda info: info["step"] == "idle")
-        # idle: only "next" applies.
-        for action in ("long red", "double red", "both"):
-            await gesture(action)
+        # idle: only "next" applies (stop closes a stopped session; there is none).
+        for command in ("pause", "undo", "stop"):
+            await gesture(command)
         ignored_until.append(asyncio.get_running_loop().time())
-        await gesture("long green", then="placing")
-        await gesture("double red")  # placing: no answer to undo
-        await gesture("long red", then="paused")
-        await gesture("long green")  # paused: next does not apply
-        await gesture("long red", then="placing")  # resume
-        await gesture("long green", then="teaching")
-        await gesture("long green")  # teaching: next does not apply before the bags are taught
-        await gesture("both", then="stopped")  # stop applies everywhere
+        await gesture("next", then="placing")
+        await gesture("undo")  # placing: no answer to undo
+        await gesture("pause", then="paused")
+        await gesture("next")  # paused: next does not apply
+        await gesture("pause", then="placing")  # resume
+        await gesture("next", then="teaching")
+        await gesture("next")  # teaching: next does not apply before the bags are taught
+        await gesture("stop", then="stopped")  # stop applies everywhere
 
     result, _, _ = play(tmp_path, scenario=researcher)
     records = records_of(result)
@@ -317,6 +330,7 @@ def test_every_command_where_it_applies_and_ignored_elsewhere(tmp_path: Path) ->
         ("teaching", "next", False),
         ("teaching", "stop", True),
     ]
+    assert {r["source"] for r in records if r["kind"] == "command"} == {"researcher"}
     assert result.final_state == "stopped"
 
 
@@ -335,8 +349,9 @@ def test_servo_fault_in_step_four_and_recovery(tmp_path: Path) -> None:
     records = records_of(result)
     faults = [r for r in records if r["kind"] == "fault"]
     assert faults[0]["fault"] == "servo" and faults[0]["joint"] == "right_elbow"
-    # The children hear no joint (the record and STATUS= name it): a grown-up is asked for.
-    assert "right elbow" not in out and "Can the grown-up" in out
+    # The joint is for the records; the children hear that a grown-up is needed.
+    assert "Kaspar: Part of my body is not working. I need a grown-up to help me." in out
+    assert "elbow" not in "".join(line for line in out.splitlines() if "Kaspar:" in line)
     resumed = [r for r in records if r["kind"] == "command" and r.get("confirm") == "resume"]
     assert resumed and resumed[0]["state"] == "fault"
     assert_trials_whole(records)
@@ -398,15 +413,16 @@ def test_a_step_that_swallows_its_cancellation_is_cancelled_again(
     swallowed: list[bool] = []
     teach_one_bag = Game._teach_one_bag
 
-    async def deaf_once(self: Game, bag: int, group: str) -> None:
+    async def deaf_once(self: Game, bag: int, teach_round: int, group: str) -> None:
         if not deaf:
             deaf.append(True)
             try:
                 await asyncio.Event().wait()
             except asyncio.CancelledError:
                 swallowed.append(True)  # and carries on, as if the cancel never came:
-                await self._wait_for_press()  # a press that only the blocked run loop gives
-        await teach_one_bag(self, bag, group)
+                # a press that only the blocked run loop gives
+                await self.presses.open(asyncio.get_running_loop().time())
+        await teach_one_bag(self, bag, teach_round, group)
 
     monkeypatch.setattr(Game, "_teach_one_bag", deaf_once)
 
@@ -414,10 +430,10 @@ def test_a_step_that_swallows_its_cancellation_is_cancelled_again(
         while not deaf:
             await asyncio.sleep(0.5)
         paused = on_event(rig, "state", lambda info: info["state"] == "paused")
-        await rig.keyfob.perform("long red")  # pause
+        await rig.command("pause")  # pause
         await paused
         await asyncio.sleep(2.0)
-        await rig.keyfob.perform("long red")  # resume
+        await rig.command("pause")  # resume
 
     result, _, _ = play(tmp_path, scenario=scenario)
     assert swallowed == [True]
@@ -497,9 +513,9 @@ def test_stop_works_even_while_a_fault_will_not_clear(tmp_path: Path) -> None:
         rig.servos.inject_fault("head_yaw", FaultKind.SILENT)  # and it never comes back
         await on_event(rig, "fault")
         await asyncio.sleep(3)
-        await rig.keyfob.perform("long red")  # resume is refused: still faulty
+        await rig.command("pause")  # resume is refused: still faulty
         await asyncio.sleep(5)
-        await rig.keyfob.perform("both")
+        await rig.command("stop")
 
     result, _, _ = play(tmp_path, config=config_for("pilot"), scenario=scenario)
     commands = [
@@ -557,7 +573,7 @@ def test_every_motion_path_of_the_game_stays_in_range_and_under_speed(tmp_path: 
             await on_event(rig, "fault")
             rig.servos.inject_fault("head_yaw", None)
             await on_event(rig, "question", lambda info: info["trial"] == 6)
-            await rig.keyfob.perform("both")  # stop: rest pose at the speed limits
+            await rig.command("stop")  # stop: rest pose at the speed limits
             await asyncio.sleep(30)
         finally:
             sampler.cancel()

@@ -112,7 +112,21 @@ def test_a_resume_goes_back_where_the_game_was() -> None:
 def test_each_confirmation_fires_a_trigger_of_the_table() -> None:
     triggers = {transition["trigger"] for transition in TRANSITIONS}
     assert set(TRIGGERS.values()) <= triggers
-    assert set(TRIGGERS) == set(Confirmation) - {Confirmation.UNDO}
+    # An undo and closing a stopped session move no stage.
+    assert set(TRIGGERS) == set(Confirmation) - {Confirmation.UNDO, Confirmation.CLOSE}
+
+
+def test_in_idle_a_stopped_session_waits_for_next_or_stop() -> None:
+    """The researcher chooses: "next" reopens the stopped session, "stop" closes it."""
+    conditions = Conditions(plays_names=True, bags_taught=False, all_done=False, resume_step="idle")
+    waiting = Facts(conditions, undo_available=False, hardware_ready=True, stopped_waiting=True)
+    assert confirmation("idle", S, waiting) is C.CLOSE
+    assert confirmation("idle", N, waiting) is C.START
+    assert confirmation("idle", P, waiting) is None
+    assert confirmation("placing", S, waiting) is C.STOP
+    reopened = Conditions(True, True, False, resume_step="guessing")
+    assert may("reopen", "idle", reopened) == "guessing"
+    assert may("reopen", "placing", reopened) is None
 
 
 def _game(settings: GameSettings) -> Game:
@@ -166,12 +180,12 @@ def test_gestures_are_named_as_the_configuration_names_them() -> None:
     assert gesture_name(gesture(GestureKind.COMMAND, "next")) == "next"
 
 
-def test_only_the_gestures_some_command_uses_are_waited_for() -> None:
+def test_on_one_keyfob_only_the_holds_some_command_uses_are_waited_for() -> None:
     commands = commands_by_gesture(GameSettings().commands)
-    assert commands == {"long green": N, "long red": P, "double red": U, "both": S}
-    needs = gesture_needs(commands)
-    assert needs.green == {GestureKind.PRESS, GestureKind.LONG}
-    assert needs.red == {GestureKind.PRESS, GestureKind.LONG, GestureKind.DOUBLE}
-    assert needs.both
-    fewer = gesture_needs({"long green": N, "long red": P})
-    assert fewer.red == {GestureKind.PRESS, GestureKind.LONG} and not fewer.both
+    # No double press: children double-tap, so it is an answer, never a command.
+    assert commands == {"long green": N, "long red": P, "both": S}
+    needs = gesture_needs(commands, hold_s=3.0)
+    assert needs.green == needs.red == {GestureKind.PRESS, GestureKind.LONG}
+    assert needs.both and needs.long_press == 3.0
+    fewer = gesture_needs({"long green": N, "both": S}, hold_s=4.0)
+    assert fewer.red == {GestureKind.PRESS} and fewer.both and fewer.long_press == 4.0

@@ -18,6 +18,7 @@ from hal.keyfob.gestures import (
     GestureNeeds,
     GestureRecognizer,
     GestureTimings,
+    held_gestures,
 )
 
 T = GestureTimings(long_press=1.0, double_press=0.4, bounce=0.03, both_window=0.3)
@@ -135,12 +136,43 @@ def test_both_held_is_delivered_after_the_threshold_and_hides_the_single_buttons
     assert run(r, [(2.0, "green", False), (2.1, "red", False)], 5.0) == []
 
 
-def test_both_let_go_early_gives_nothing():
+def test_both_let_go_early_is_the_first_buttons_press_then_the_seconds():
+    # A child squeezing the keyfob meant the button that went down first.
     r = GestureRecognizer(T, RESEARCHER_GESTURES)
-    script = [(0.0, "green", True), (0.1, "red", True), (0.3, "green", False), (0.4, "red", False)]
-    assert run(r, script, 5.0) == []
+    script = [(0.0, "red", True), (0.1, "green", True), (0.3, "red", False), (0.4, "green", False)]
+    assert summary(run(r, script, 5.0)) == [(P, "red", 0.0, 0.4), (P, "green", 0.1, 0.4)]
     # And the buttons work normally afterwards.
     assert [g.kind for g in run(r, [(6.0, "green", True), (6.1, "green", False)], 7.0)] == [P]
+
+
+def test_both_held_names_the_button_that_went_down_first():
+    r = GestureRecognizer(T, RESEARCHER_GESTURES)
+    (gesture,) = run(r, [(0.0, "red", True), (0.2, "green", True)], 1.2)
+    assert (gesture.kind, gesture.first) == (B, "red")
+
+
+def test_a_hold_asked_for_by_the_game_replaces_the_keyfobs_long_press():
+    # The one-keyfob researcher: holds of 3 s; a child's 1.5 s hold is only a press.
+    r = GestureRecognizer(T, held_gestures(3.0))
+    assert summary(run(r, [(0.0, "green", True), (1.5, "green", False)], 2.0)) == [
+        (P, "green", 0.0, 1.53)
+    ]
+    assert summary(run(r, [(5.0, "red", True)], 8.0)) == [(L, "red", 5.0, 8.0)]
+    run(r, [(9.0, "red", False)], 10.0)
+    assert summary(run(r, [(11.0, "green", True), (11.1, "red", True)], 14.1)) == [
+        (B, "both", 11.0, 14.1)
+    ]
+    run(r, [(15.0, "green", False), (15.0, "red", False)], 16.0)
+    # No double press on one keyfob: a double tap is two presses.
+    double = [(20.0, "red", True), (20.1, "red", False), (20.2, "red", True), (20.3, "red", False)]
+    assert [(g.kind, g.at) for g in run(r, double, 21.0)] == [(P, 20.0), (P, 20.2)]
+
+
+def test_a_hold_no_longer_than_the_windows_is_refused():
+    with pytest.raises(SettingsError, match=r"expected a hold longer than 0\.4 s"):
+        GestureRecognizer(T, held_gestures(0.4))
+    with pytest.raises(SettingsError, match=r"found 0\.2"):
+        GestureRecognizer(T).set_needs(held_gestures(0.2))
 
 
 def test_repress_during_an_aborted_chord_is_still_the_mash():
@@ -153,7 +185,8 @@ def test_repress_during_an_aborted_chord_is_still_the_mash():
         (0.6, "red", False),
         (0.7, "green", False),
     ]
-    assert run(r, script, 5.0) == []
+    # One squeeze, whatever the fingers did inside it: green (first) then red.
+    assert summary(run(r, script, 5.0)) == [(P, "green", 0.0, 0.7), (P, "red", 0.1, 0.7)]
 
 
 def test_second_button_outside_the_window_is_its_own_press():

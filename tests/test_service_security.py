@@ -258,6 +258,8 @@ def test_records_hold_no_personal_data_beyond_the_plan(
     # (their pseudonymous participant codes, if planned: attributes live elsewhere).
     assert set(plan["plan"]) <= {
         "group",
+        "number",
+        "script",
         "profile",
         "speak_uncertainty",
         "children",

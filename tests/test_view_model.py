@@ -233,3 +233,15 @@ def test_daemon_events_of_kinds_this_code_does_not_know() -> None:
         ("start", False, ""),
         ("shutdown", False, "SIGTERM"),
     ]
+
+
+def test_the_researchers_device_away_is_a_failure_that_stopped_nothing() -> None:
+    lost = HalRecord(event=HalEvent.RESEARCHER_LOST, reason="not available at start: ENOENT")
+    view = fold(StepRecord(to="placing"), lost, HalRecord(event=HalEvent.RESEARCHER_BACK))
+    (fault,) = view.faults
+    assert (fault.source, fault.detail, fault.stopped_game) == (
+        "researcher",
+        "not available at start: ENOENT",
+        False,
+    )
+    assert view.stage == "placing"

@@ -18,6 +18,13 @@ Long, double and both are delivered as soon as they are certain: long and
 both when the hold reaches long_press, double at the second key-down. Every
 gesture carries `at`, the time of the key-down that began it, so reaction
 times are measured from the child's press, not from the recogniser's decision.
+The game may ask for a longer hold than the keyfob's long_press
+(GestureNeeds.long_press: a researcher's hold on the children's keyfob is 3 s).
+
+Both buttons: held together for long_press they are one gesture, BOTH, which
+names the button that went down first (`first`). Let go sooner, they are what a
+child squeezing the keyfob meant: the first button's press, then the second's,
+each at its own key-down (the game takes the first as the answer).
 
 Contact bounce: a release followed by a press within `bounce` is one hold;
 this costs `bounce` on presses decided at the release. Autorepeat (value 2)
@@ -64,6 +71,8 @@ class Gesture:
     at: float
     # Clock time at which the recogniser was certain; `decided - at` is its latency.
     decided: float
+    # BOTH: the button that went down first ("green" or "red"); None for the others.
+    first: str | None = None
 
 
 ANSWER = frozenset({GestureKind.PRESS})
@@ -79,6 +88,9 @@ class GestureNeeds:
     red: frozenset[GestureKind] = EVERYTHING
     # Green and red held together for long_press (the researcher's stop).
     both: bool = True
+    # How long a hold must last to be LONG (or BOTH); None: the keyfob's long_press.
+    # Must be longer than the keyfob's double_press (GestureTimings' order).
+    long_press: float | None = None
 
     def of(self, button: str) -> frozenset[GestureKind]:
         """The gestures listened for on `button`; a command key only ever gives its press."""
@@ -89,12 +101,26 @@ class GestureNeeds:
         return ANSWER
 
 
-# The researcher gestures of the design: long green next, long red pause,
-# double red undo, both stop. Green presses wait for the release; red ones
-# also wait out the double-press window.
+# Every gesture on both buttons with the keyfob's own long press (tests, bring-up).
 RESEARCHER_GESTURES = GestureNeeds(green=ANSWER_OR_LONG, red=EVERYTHING, both=True)
-# Children's answers only (researcher commands on extra keys): presses at key-down.
+# Children's answers only (the researcher's commands on a device of their own, or on a
+# keypad's extra keys): every key-down is a press, delivered at once; a chord is two.
 ANSWERS_ONLY = GestureNeeds(green=ANSWER, red=ANSWER, both=False)
+
+
+def held_gestures(hold_s: float, *, green: bool = True, red: bool = True, both: bool = True) -> (
+    GestureNeeds
+):
+    """The one-keyfob needs: presses, and holds of `hold_s` (long green, long red, both).
+
+    No double press: a double tap is what children do. Presses wait for the release.
+    """
+    return GestureNeeds(
+        green=ANSWER_OR_LONG if green else ANSWER,
+        red=ANSWER_OR_LONG if red else ANSWER,
+        both=both,
+        long_press=hold_s,
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,6 +147,7 @@ class GestureTimings:
 @dataclass(slots=True)
 class _Key:
     needs: frozenset[GestureKind] = frozenset()
+    long_after: float = 1.0  # the hold that makes a long press, fixed at key-down
     down_at: float | None = None  # start of the current hold; None when up
     consumed: bool = False  # the current hold has produced (or forfeited) its gesture
     release_at: float | None = None  # a release not yet confirmed (bounce gap)
@@ -131,10 +158,14 @@ class _Key:
 
 @dataclass(slots=True)
 class _Chord:
+    first: str
     first_at: float
     second_at: float
+    long_after: float
     fired: bool = False
     broken: bool = False  # one of the two was let go
+    # Let go early: the presses it stands for, each delivered once its key is up.
+    pending: list[tuple[str, float]] = field(default_factory=list)
 
 
 @dataclass
@@ -149,13 +180,29 @@ class GestureRecognizer:
     _now: float = field(init=False, default=float("-inf"))
 
     def __post_init__(self) -> None:
-        """Give every button and command key its idle state."""
+        """Give every button and command key its idle state; SettingsError for a hold that
+        is not longer than the double-press and chord windows."""
         self.commands = frozenset(self.commands)
         self._keys = {name: _Key() for name in (*CHORD, *sorted(self.commands))}
+        self._check(self.needs)
 
     def set_needs(self, needs: GestureNeeds) -> None:
-        """Takes effect at each button's next key-down; a gesture in progress keeps its rules."""
+        """Takes effect at each button's next key-down; a gesture in progress keeps its rules.
+
+        SettingsError for a hold (needs.long_press) not longer than the double-press
+        and chord windows.
+        """
+        self._check(needs)
         self.needs = needs
+
+    def _check(self, needs: GestureNeeds) -> None:
+        hold = needs.long_press
+        shortest = max(self.timings.double_press, self.timings.both_window)
+        if hold is not None and not hold > shortest:
+            raise SettingsError(
+                f"expected a hold longer than {shortest} s (the double-press and chord "
+                f"windows), found {hold}"
+            )
 
     @property
     def buttons(self) -> tuple[str, ...]:
@@ -231,6 +278,7 @@ class GestureRecognizer:
             out.append(self._gesture(GestureKind.DOUBLE, name, first, at))
             return
         key.needs = self.needs.of(name)
+        key.long_after = self._long_after()
         key.down_at, key.consumed, key.press_due = at, False, None
         if self._chord is not None and name in CHORD:
             key.consumed = True  # pressed again during a chord: still part of the mash
@@ -257,10 +305,17 @@ class GestureRecognizer:
             or at - other.down_at > self.timings.both_window
         ):
             return False
-        self._chord = _Chord(first_at=other.down_at, second_at=at)
+        first = RED if name == GREEN else GREEN
+        self._chord = _Chord(
+            first=first, first_at=other.down_at, second_at=at, long_after=self._long_after()
+        )
         for chord_key in (self._keys[GREEN], self._keys[RED]):
             chord_key.consumed, chord_key.press_due = True, None
         return True
+
+    def _long_after(self) -> float:
+        override = self.needs.long_press
+        return override if override is not None else self.timings.long_press
 
     def _up(self, key: _Key, at: float) -> None:
         if key.down_at is not None and key.release_at is None:
@@ -277,14 +332,14 @@ class GestureRecognizer:
                 continue
             if key.down_at is not None and not key.consumed:
                 if GestureKind.LONG in key.needs:
-                    due.append((("long", name), key.down_at + timings.long_press))
+                    due.append((("long", name), key.down_at + key.long_after))
                 if key.press_due is not None:
                     due.append((("press_due", name), key.press_due))
             if key.first_up is not None:
                 due.append((("single", name), key.first_up + timings.double_press))
         chord = self._chord
         if chord is not None and not chord.fired and not chord.broken and self._chord_held():
-            due.append((("both", BOTH), chord.second_at + timings.long_press))
+            due.append((("both", BOTH), chord.second_at + chord.long_after))
         return due
 
     def _chord_held(self) -> bool:
@@ -294,8 +349,11 @@ class GestureRecognizer:
         kind, name = action
         if kind == "both":
             assert self._chord is not None
-            self._chord.fired = True
-            out.append(self._gesture(GestureKind.BOTH, BOTH, self._chord.first_at, deadline))
+            chord = self._chord
+            chord.fired = True
+            out.append(
+                Gesture(GestureKind.BOTH, BOTH, chord.first_at, deadline, first=chord.first)
+            )
             return
         key = self._keys[name]
         if kind == "release":
@@ -320,13 +378,19 @@ class GestureRecognizer:
         key.down_at, key.release_at, key.press_due, key.consumed = None, None, None, False
         chord = self._chord
         if chord is not None and name in CHORD:
-            # Nothing comes of a chord let go early: a child mashing both buttons
-            # has given no answer, and the researcher's stop needs the full hold.
             if not chord.fired and not chord.broken:
-                log.info("gesture dropped", reason="green and red held together too briefly")
+                # Let go before the hold: a child squeezing both buttons, who meant the
+                # first one. Its press, then the second's, once both are up.
+                chord.pending = [
+                    (chord.first, chord.first_at),
+                    (RED if chord.first == GREEN else GREEN, chord.second_at),
+                ]
             chord.broken = True
             if all(self._keys[other].down_at is None for other in CHORD):
                 self._chord = None
+                for button, at in chord.pending:
+                    if GestureKind.PRESS in self._keys[button].needs:
+                        out.append(self._gesture(GestureKind.PRESS, button, at, released))
             return
         if consumed or down_at is None:
             return

@@ -40,7 +40,7 @@ from hal.clock import Clock
 from hal.errors import KeyfobError
 from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import Gesture, GestureNeeds, GestureRecognizer, GestureTimings
-from hal.keyfob.settings import KeyfobSettings
+from hal.keyfob.settings import InputDeviceSettings
 
 log = structlog.get_logger("kaspar.keyfob")
 
@@ -110,13 +110,14 @@ def open_evdev(path: str) -> EvdevDevice:
 
 
 class Keyfob:
-    """The real keyfob; satisfies hal.keyfob.api.KeyfobInput."""
+    """The real keyfob (or the researcher's keypad); satisfies hal.keyfob.api.KeyfobInput."""
 
     def __init__(
         self,
-        settings: KeyfobSettings,
+        settings: InputDeviceSettings,
         clock: Clock,
         *,
+        role: str = "keyfob",
         needs: GestureNeeds | None = None,
         opener: Callable[[str], EvdevDevice] = open_evdev,
         input_dir: str = "/dev/input",
@@ -124,6 +125,7 @@ class Keyfob:
     ) -> None:
         """Read the keyfob that `settings` names, stamping gestures with `clock`.
 
+        `role` names the device in the log ("keyfob", "researcher");
         `needs` are the gestures listened for at first (set_needs changes them);
         `opener` opens a device node (evdev's, or a test's pipe device); `input_dir`
         is watched for the keyfob's return, and looked at again every `retry_every`
@@ -131,6 +133,7 @@ class Keyfob:
         """
         self._settings = settings
         self._clock = clock
+        self._log = log.bind(input=role)
         self._opener = opener
         self._input_dir = input_dir
         # Safety net under inotify: look again now and then, in case an event was missed.
@@ -168,7 +171,7 @@ class Keyfob:
             # Said once here: a Bluetooth keyfob pairs after the computer starts, a USB
             # one is plugged in late; the watch below finds it when it comes.
             reason = f"not available at start: {_describe(error)}"
-            log.warning("keyfob not connected; watching for it", reason=reason)
+            self._log.warning("keyfob not connected; watching for it", reason=reason)
             self._report_lost(reason)
 
     async def next_event(self) -> InputEvent:
@@ -236,7 +239,7 @@ class Keyfob:
                     device.grab()
                 except OSError as error:
                     # Still usable, but its keys also reach whoever else holds it.
-                    log.warning("keyfob not grabbed", device=path, error=_describe(error))
+                    self._log.warning("keyfob not grabbed", device=path, error=_describe(error))
             fd = device.fileno()
             asyncio.get_running_loop().add_reader(fd, self._on_readable)
         except BaseException:
@@ -244,7 +247,7 @@ class Keyfob:
                 device.close()
             raise
         self._device, self._fd = device, fd
-        log.info("keyfob open", device=path, name=device.name)
+        self._log.info("keyfob open", device=path, name=device.name)
 
     def _drop_device(self) -> None:
         if self._device is None:
@@ -285,7 +288,7 @@ class Keyfob:
             if event.code == SYN_DROPPED:
                 # The kernel's buffer overflowed: which keys are down is unknown
                 # until the next report, so forget the holds rather than guess.
-                log.warning("keyfob events dropped by the kernel")
+                self._log.warning("keyfob events dropped by the kernel")
                 self._dropping = True
                 return self._recogniser.reset()
             if event.code == SYN_REPORT:
@@ -297,7 +300,7 @@ class Keyfob:
         if button is None:
             if event.code not in self._unknown_codes:
                 self._unknown_codes.add(event.code)
-                log.info("keyfob key not mapped", code=event.code)
+                self._log.info("keyfob key not mapped", code=event.code)
             return []
         return self._recogniser.key(button, event.value == KEY_DOWN, at)
 
@@ -322,7 +325,7 @@ class Keyfob:
     # -- lost and back ------------------------------------------------------
 
     def _lose(self, reason: str) -> None:
-        log.warning("keyfob lost", reason=reason)
+        self._log.warning("keyfob lost", reason=reason)
         self._drop_device()
         self._publish(self._recogniser.reset())
         self._report_lost(reason)
@@ -350,13 +353,13 @@ class Keyfob:
                         if now < grace_until:
                             await self._clock.sleep(0.1)
                             continue
-                        log.warning("keyfob not readable", error=_describe(error))
+                        self._log.warning("keyfob not readable", error=_describe(error))
                         grace_until = None
                     except (OSError, KeyfobError) as error:
-                        log.debug("keyfob still away", error=_describe(error))
+                        self._log.debug("keyfob still away", error=_describe(error))
                     except Exception as error:
                         # Not expected from a device node, but the watch must outlive it.
-                        log.error("keyfob reopen failed", error=repr(error))
+                        self._log.error("keyfob reopen failed", error=repr(error))
                     else:
                         assert self._device is not None
                         self._events.put_nowait(

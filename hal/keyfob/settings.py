@@ -1,22 +1,31 @@
-"""Settings of the keyfob (the `[keyfob]` table of kaspar.toml).
+"""Settings of the keyfob (the `[keyfob]` table of kaspar.toml) and of the researcher's
+input (the `[researcher]` table).
 
 Key codes are evdev names ("KEY_PAGEDOWN") or numbers; `evtest` shows what a
 keyfob sends. Timings are in seconds. Which gestures each button has is the
 game's decision (hal.keyfob.gestures.GestureNeeds), not the configuration's: the
 same keyfob serves games that need fewer gestures, and fewer gestures mean
 faster presses.
+
+The children's keyfob carries green and red. The researcher's commands come
+from a device of their own by default (a keypad, a presenter remote, a second
+keyfob with enough keys: `[researcher]`, read by a second reader), or from the
+extra keys of the children's keypad, or, on a robot with one keyfob only, from
+holds on the children's keyfob that children do not make by accident.
 """
 
 from __future__ import annotations
 
 import re
-from typing import Annotated, Literal
+from typing import Annotated, Literal, Protocol
 
 import msgspec
 
 from hal.errors import SettingsError
 
 DEFAULT_DEVICE = "/dev/input/kaspar-keyfob"
+# The researcher's own device, as systemd/99-kaspar-keyfob.rules may name it.
+DEFAULT_RESEARCHER_DEVICE = "/dev/input/kaspar-researcher"
 
 _KEY_NAME = re.compile(r"(KEY|BTN)_[A-Z0-9_]+")
 
@@ -147,3 +156,136 @@ def _code(field: str, key: str | int) -> int:
 def _number_or_name(key: str) -> str | int:
     # TOML table keys are strings; "30" means the code 30.
     return int(key) if key.isdigit() else key
+
+
+class InputDeviceSettings(Protocol):
+    """What the evdev reader (hal.keyfob.reader.Keyfob) reads of a device's settings."""
+
+    @property
+    def device_path(self) -> str | None:
+        """The node to open, or None to find the device by `name`."""
+        ...
+
+    @property
+    def name(self) -> str | None:
+        """The device's name as `evtest` lists it, when found by name."""
+        ...
+
+    @property
+    def grab(self) -> bool:
+        """Take the device's keys for ourselves (EVIOCGRAB)."""
+        ...
+
+    @property
+    def reopen_grace(self) -> float:
+        """Seconds to keep retrying a node udev has not finished."""
+        ...
+
+    @property
+    def long_press(self) -> float:
+        """The recogniser's long press, in seconds."""
+        ...
+
+    @property
+    def double_press(self) -> float:
+        """The recogniser's double-press window, in seconds."""
+        ...
+
+    @property
+    def bounce(self) -> float:
+        """The recogniser's contact-bounce gap, in seconds."""
+        ...
+
+    @property
+    def both_window(self) -> float:
+        """The recogniser's chord window, in seconds."""
+        ...
+
+    def key_map(self) -> dict[int, str]:
+        """Each mapped key's evdev code -> its button or command name."""
+        ...
+
+
+# Where the researcher's commands come from (the `source` of [researcher]).
+ResearcherSource = Literal["device", "keypad", "keyfob"]
+# A presenter remote's keys (most send these), one command each at its press.
+DEFAULT_RESEARCHER_KEYS = {
+    "KEY_PAGEDOWN": "next",
+    "KEY_PAGEUP": "pause",
+    "KEY_B": "undo",
+    "KEY_ESC": "stop",
+}
+# A researcher's hold on the children's keyfob: longer than any child's press.
+Hold = Annotated[float, msgspec.Meta(ge=2.0, le=10.0, extra={"unit": "s"})]
+
+
+class ResearcherSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only=True):
+    """Where the researcher's commands come from, and that device's keys.
+
+    source "device" (the default): a keypad or remote of the researcher's own, opened
+    by `device` or `name` like the keyfob, each key in `keys` one command given at its
+    press; the children's keyfob then carries only their answers. "keypad": the extra
+    keys of the children's keypad ([keyfob.commands]). "keyfob": the children's keyfob
+    alone, where a researcher's gesture is a hold of `hold_s` (game.commands: long
+    green, long red, both) begun while Kaspar is asking the children nothing.
+    """
+
+    source: ResearcherSource = "device"
+    # "sim": a simulated device (tests, the demo, `kasparctl run --sim`).
+    backend: Literal["real", "sim"] = "real"
+    device: DevicePath | None = None
+    name: DeviceName | None = None
+    grab: bool = True
+    # Key (evdev name or number) -> command: next, pause, undo, stop.
+    keys: dict[str, CommandName] = msgspec.field(
+        default_factory=lambda: dict(DEFAULT_RESEARCHER_KEYS)
+    )
+    hold_s: Hold = 3.0
+    reopen_grace: Annotated[float, msgspec.Meta(gt=0, le=60, extra={"unit": "s"})] = 5.0
+
+    def __post_init__(self) -> None:
+        """Device and name exclude each other; every key resolves, each once.
+
+        Raises SettingsError (a ValueError) naming the key.
+        """
+        if self.device is not None and self.name is not None:
+            raise SettingsError("set device or name, not both")
+        seen: dict[int, str] = {}
+        for key in self.keys:
+            code = _code(f"keys.{key}", _number_or_name(key))
+            if code in seen and code != -1:
+                raise SettingsError(f"keys.{key} is the same key as keys.{seen[code]}")
+            seen[code] = key
+
+    @property
+    def device_path(self) -> str | None:
+        """The path to open, or None when the device is found by name."""
+        if self.name is not None:
+            return None
+        return self.device or DEFAULT_RESEARCHER_DEVICE
+
+    def key_map(self) -> dict[int, str]:
+        """Each key's evdev code -> its command name."""
+        return {key_code(_number_or_name(key)): command for key, command in self.keys.items()}
+
+    # A keypad's keys are commands given at their press: the recogniser's timings only
+    # matter for gestures it never sees there, so they are the keyfob's defaults.
+    @property
+    def long_press(self) -> float:
+        """The keyfob's default long press (unused: every key is a command at its press)."""
+        return 1.0
+
+    @property
+    def double_press(self) -> float:
+        """The keyfob's default double-press window (unused here)."""
+        return 0.4
+
+    @property
+    def bounce(self) -> float:
+        """The keyfob's default bounce gap: a key released and pressed within it is held."""
+        return 0.03
+
+    @property
+    def both_window(self) -> float:
+        """The keyfob's default chord window (unused here)."""
+        return 0.3

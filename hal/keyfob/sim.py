@@ -6,7 +6,17 @@ same latencies (a red press waits out its double-press window) as from the
 real keyfob. With a virtual clock a whole script runs in no real time.
 
 Actions: "green", "red", "long green", "long red", "double green",
-"double red", "both", "command NAME", "lost", "back".
+"double red", "both", "command NAME", "lost", "back", and the ones messy
+children make: "hold BUTTON SECONDS" (one press held that long) and
+"chord FIRST SECONDS" (both buttons, FIRST a moment before the other, held
+that long). A long press and "both" are held just past the hold the game asks
+for (its GestureNeeds.long_press), or the keyfob's long press.
+
+The terminal and fifo keyfobs are the children's keyfob and, when there is
+one, the researcher's device: g and r are the children's green and red, D a
+double green; G, R, d and b are the researcher's next, pause, undo and stop,
+given on the researcher's device, or as the keyfob gesture that means them
+when the researcher uses the children's keyfob.
 """
 
 from __future__ import annotations
@@ -44,7 +54,9 @@ ACTIONS = (
     "lost",
     "back",
 )
-_ACTION_LIST = ", ".join([*ACTIONS, "command NAME"])
+_ACTION_LIST = ", ".join(
+    [*ACTIONS, "command NAME", "hold BUTTON SECONDS", "chord FIRST SECONDS"]
+)
 
 
 class SimKeyfobOptions(TypedDict, total=False):
@@ -98,17 +110,19 @@ class SimKeyfob:
         """Mark the keyfob closed; nothing else to release."""
         self._closed = True
 
-    async def perform(self, action: str) -> None:
+    async def perform(self, action: str) -> float:
         """Press the keys of one action, then wait until its gestures are certain.
 
         Key times are planned on the clock, so a stalled process cannot turn a
-        press into a long press. Raises InvalidArgument for an unknown action.
+        press into a long press. Returns when its first key went down (one action at a
+        time: a keyfob has one pair of buttons). Raises InvalidArgument for an unknown
+        action.
         """
         async with self._lock:
             # Key times are the planned ones, as a real keyfob's carry the kernel's
             # timestamps: a process stalled mid-press (a busy machine, a fast
             # simulated clock) must not turn a child's press into a long press.
-            planned = self._clock.now()
+            planned = started = self._clock.now()
             for step in self._steps(action):
                 if isinstance(step, float):
                     planned += step
@@ -117,12 +131,22 @@ class SimKeyfob:
                     button, down = step
                     self._publish(self._recogniser.key(button, down, planned))
             await self._settle()
+        return started
 
     def _steps(self, action: str) -> list[float | tuple[str, bool]]:
         words = action.split()
-        hold_long = self._timings.long_press + 0.2
+        asked = self._recogniser.needs.long_press
+        hold_long = (asked if asked is not None else self._timings.long_press) + 0.2
         if words[:1] == ["command"] and len(words) == 2:
             return [(words[1], True), PRESS_HOLD, (words[1], False)]
+        held = _held(words)
+        if held is not None:
+            kind, button, seconds = held
+            if kind == "hold":
+                return [(button, True), seconds, (button, False)]
+            other = RED if button == GREEN else GREEN
+            return [(button, True), CHORD_LAG, (other, True), seconds, (button, False),
+                    (other, False)]  # fmt: skip
         if action in (GREEN, RED):
             return [(action, True), PRESS_HOLD, (action, False)]
         if len(words) == 2 and words[1] in (GREEN, RED) and words[0] in ("long", "double"):
@@ -185,7 +209,8 @@ class ScriptedKeyfob(SimKeyfob):
 
     def _steps_check(self, action: str) -> None:
         words = action.split()
-        if action not in ACTIONS and not (words[:1] == ["command"] and len(words) == 2):
+        known = action in ACTIONS or _held(words) is not None
+        if not known and not (words[:1] == ["command"] and len(words) == 2):
             raise InvalidArgument(
                 f"unknown keyfob action {action!r}; expected one of {_ACTION_LIST}"
             )
@@ -209,6 +234,17 @@ class ScriptedKeyfob(SimKeyfob):
                 await self._task
 
 
+def _held(words: list[str]) -> tuple[str, str, float] | None:
+    """("hold" or "chord", button, seconds) of "hold green 1.5" or "chord red 0.4"."""
+    if len(words) != 3 or words[0] not in ("hold", "chord") or words[1] not in (GREEN, RED):
+        return None
+    try:
+        seconds = float(words[2])
+    except ValueError:
+        return None
+    return (words[0], words[1], seconds) if 0.0 < seconds < 60.0 else None
+
+
 def parse_script(text: str) -> list[tuple[float, str]]:
     """Parse "1.5 green; 0.5 long red" into [(1.5, "green"), (0.5, "long red")].
 
@@ -228,32 +264,54 @@ def parse_script(text: str) -> list[tuple[float, str]]:
     return script
 
 
-# Keys of the terminal keyfob.
+# Keys of the terminal keyfob: the children's, and the researcher's commands.
 TERMINAL_KEYS = {
     "g": "green",
     "r": "red",
-    "G": "long green",
-    "R": "long red",
-    "d": "double red",
     "D": "double green",
-    "b": "both",
     "l": "lost",
     "k": "back",
 }
+RESEARCHER_KEYS = {"G": "next", "R": "pause", "d": "undo", "b": "stop"}
+# A command given on the children's keyfob when the researcher has no device of their own.
+COMMAND_GESTURES = {"next": "long green", "pause": "long red", "undo": "double red", "stop": "both"}
 TERMINAL_HELP = (
-    "keyfob: g green, r red, G long green, R long red, d double red, "
-    "D double green, b both, l lost, k back"
+    "children: g green, r red, D double green; researcher: G next, R pause, d undo, "
+    "b stop; keyfob: l lost, k back"
 )
+
+
+class ResearcherKeys:
+    """Where the researcher's terminal keys go: their own device, else the children's keyfob."""
+
+    def __init__(self, keyfob: SimKeyfob, device: SimKeyfob | None) -> None:
+        """Commands on `device` (a simulated keypad of command keys), or gestures on `keyfob`."""
+        self.keyfob = keyfob
+        self.device = device
+
+    async def command(self, name: str) -> None:
+        """Give the researcher's command `name` ("next", "pause", "undo", "stop")."""
+        if self.device is not None:
+            await self.device.perform(f"command {name}")
+        else:
+            await self.keyfob.perform(COMMAND_GESTURES[name])
 
 
 class TerminalKeyfob(SimKeyfob):
     """Keys typed in the terminal become keyfob actions (one character each)."""
 
     def __init__(
-        self, clock: Clock, stream: TextIO | None = None, **options: Unpack[SimKeyfobOptions]
+        self,
+        clock: Clock,
+        stream: TextIO | None = None,
+        *,
+        researcher: SimKeyfob | None = None,
+        **options: Unpack[SimKeyfobOptions],
     ) -> None:
-        """Read keys from `stream` (standard input by default) once started."""
+        """Read keys from `stream` (standard input by default) once started; the
+        researcher's keys go to `researcher` (their simulated device), if given."""
         super().__init__(clock, **options)
+        self.researcher = ResearcherKeys(self, researcher)
         self._stream = stream or sys.stdin
         # What termios.tcgetattr returns (typeshed: list[Any]), handed back unchanged.
         self._saved_mode: list[Any] | None = None
@@ -289,13 +347,12 @@ class TerminalKeyfob(SimKeyfob):
             asyncio.get_running_loop().remove_reader(self._stream.fileno())
             return
         for char in data:
-            action = TERMINAL_KEYS.get(char)
-            if action is not None:
-                self._pending.put_nowait(action)
+            if char in TERMINAL_KEYS or char in RESEARCHER_KEYS:
+                self._pending.put_nowait(char)
 
     async def _perform_keys(self) -> None:
         while True:
-            await self.perform(await self._pending.get())
+            await _perform_key(self, self.researcher, await self._pending.get())
 
     async def close(self) -> None:
         """Stop reading keys and give the terminal its mode back."""
@@ -330,10 +387,15 @@ class FifoKeyfob(SimKeyfob):
         clock: Clock,
         *,
         retry_every: float = 5.0,
+        researcher: SimKeyfob | None = None,
         **options: Unpack[SimKeyfobOptions],
     ) -> None:
-        """Keys from the fifo at `path` once started; looked for again every `retry_every` s."""
+        """Keys from the fifo at `path` once started; looked for again every `retry_every` s.
+
+        The researcher's keys go to `researcher` (their simulated device), if given.
+        """
         super().__init__(clock, **options)
+        self.researcher = ResearcherKeys(self, researcher)
         self._path = path
         self._retry_every = retry_every
         self._connected = False
@@ -409,10 +471,18 @@ class FifoKeyfob(SimKeyfob):
         except BlockingIOError:
             return
         for char in data:
-            action = TERMINAL_KEYS.get(char)
-            if action is not None and action not in ("lost", "back"):
-                self._pending.put_nowait(action)
+            if TERMINAL_KEYS.get(char) not in (None, "lost", "back") or char in RESEARCHER_KEYS:
+                self._pending.put_nowait(char)
 
     async def _perform_keys(self) -> None:
         while True:
-            await self.perform(await self._pending.get())
+            await _perform_key(self, self.researcher, await self._pending.get())
+
+
+async def _perform_key(keyfob: SimKeyfob, researcher: ResearcherKeys, char: str) -> None:
+    """One terminal key: a child's action on the keyfob, or the researcher's command."""
+    command = RESEARCHER_KEYS.get(char)
+    if command is not None:
+        await researcher.command(command)
+    else:
+        await keyfob.perform(TERMINAL_KEYS[char])

@@ -36,7 +36,13 @@ from kasparctl.sim.demo import (
     run_demo,
     with_variant,
 )
-from kasparctl.sim.teacher import DEFAULT_THINK_S, Teacher, TeacherError, load_teacher
+from kasparctl.sim.teacher import (
+    DEFAULT_THINK_S,
+    Messiness,
+    Teacher,
+    TeacherError,
+    load_teacher,
+)
 
 # Slower than real time down to a thousandth; faster up to a million times (beyond, the
 # clock's steps are below what the loop can time: use --fast).
@@ -71,6 +77,14 @@ def register(subparsers: Any) -> None:
         metavar="FILE",
         help="children answering as a teacher model (`kasparctl fit-teacher`): its rates "
         "pooled, its reaction times",
+    )
+    # Messy children, per answer: a hold, a double tap, both buttons, a press while
+    # Kaspar is still asking. None of it may become a researcher's command.
+    parser.add_argument("--p-hold", type=PROBABILITY, default=0.0, help="an answer held 0.6-5 s")
+    parser.add_argument("--p-double", type=PROBABILITY, default=0.0, help="an answer pressed twice")
+    parser.add_argument("--p-both", type=PROBABILITY, default=0.0, help="both buttons squeezed")
+    parser.add_argument(
+        "--p-early", type=PROBABILITY, default=0.0, help="a press while Kaspar asks"
     )
     parser.add_argument(
         "--json", action="store_true", help="end with one JSON line summarising the game"
@@ -111,6 +125,9 @@ def run(arguments: argparse.Namespace) -> int:
                 )
             model = load_teacher(arguments.teacher)
             teacher, think_s = model.pooled(), model.think_s()
+        messiness = Messiness(
+            arguments.p_hold, arguments.p_double, arguments.p_both, arguments.p_early
+        )
     except (ConfigError, TeacherError, LearnerError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
@@ -128,6 +145,7 @@ def run(arguments: argparse.Namespace) -> int:
         seed=seed,
         teacher=teacher,
         think_s=think_s,
+        messiness=messiness,
         interactive=arguments.interactive,
         # A reader that goes away (`| head`) ends the demo, quietly (exit 0).
         out=cast(TextIO, Transcript(sys.stdout)),

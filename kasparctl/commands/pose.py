@@ -34,6 +34,7 @@ from kasparctl.commands.bringup import (
 from kasparctl.commands.toml_patch import BARE_KEY, TomlPatchError, set_table
 from kasparctl.config import (
     HAPPY_POSE,
+    LISTENING_POSE,
     REST_POSE,
     SAD_POSE,
     Config,
@@ -300,6 +301,8 @@ def _role(name: str, config: Config) -> str:
         return "game: happy face"
     if name == SAD_POSE:
         return "game: sad face"
+    if name == LISTENING_POSE:
+        return "game: listening"
     if name == REST_POSE:
         return "rest positions"
     if name in config.game.locations:

@@ -20,9 +20,15 @@ class GameEvent(enum.StrEnum):
     SESSION = "session"  # session: the id of the session just opened
     RESUMED = "resumed"  # step: the stage the resumed session carries on in
     WAITING_FOR_RESEARCHER = "waiting_for_researcher"  # step: idle, placing or revealing
-    TEACH = "teach"  # bag, round: Kaspar asks for bag's pose (from 0)
+    # Kaspar starts asking: in step 4 trial, target, choice (indices), child; in step 2
+    # bag, round, mover, presser (children's names). Presses are early until it ends.
+    ASKING = "asking"
+    # bag, round, mover, presser: Kaspar has asked for bag's pose (from 0) and waits.
+    TEACH = "teach"
     POINT = "point"  # target: the name Kaspar points at
-    QUESTION = "question"  # target, choice (indices), trial: the question is finished
+    # target, choice (indices), trial, child: the question is finished, Kaspar listens.
+    QUESTION = "question"
+    LISTENING = "listening"  # (none): Kaspar shows it listens (its pose, its sound)
     PROMPT = "prompt"  # line: the prompt's phrase key (nobody answered)
     ANSWERED = "answered"  # trial, feedback: the answer is recorded
     FAULT = "fault"  # kind: the FaultSource that stopped the game

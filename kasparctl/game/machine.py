@@ -12,6 +12,13 @@ Every change is a record first (fsynced), then applied to GameState, then
 snapshotted; only then does Kaspar react. The game sees the hardware only
 through the hal interfaces, and the learner never sees the answer key.
 
+Kaspar listens when it has asked (kasparctl.game.presses): a child's press is
+an answer from the question's last words on, an early press is acknowledged,
+and the children's keyfob carries nothing but answers when the researcher's
+commands come from a device of their own (the default). On a robot with one
+keyfob the researcher's commands are holds begun while Kaspar asks the
+children nothing; so are they while the researcher's own device is away.
+
 Faults, in every stage: a part that fails (a servo, the bus, the keyfob, the
 voice, the disk) or a bug (an error in a step, or in handling an input) is
 recorded (in the session, or in the daemon's event log when none is open),
@@ -38,16 +45,17 @@ from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import msgspec
 import structlog
+from msgspec import UNSET
 from transitions.extensions.asyncio import AsyncMachine
 
 from hal import Hardware
 from hal.errors import HalError
-from hal.keyfob.api import KeyfobBack, KeyfobLost
-from hal.keyfob.gestures import Gesture, GestureKind
+from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
+from hal.keyfob.gestures import ANSWERS_ONLY, Gesture, GestureKind
 from hal.servos.api import Fault
 from kasparctl.config import Config, SessionPlan
 from kasparctl.game.events import GameEvent, Listener
-from kasparctl.game.phrases import BAND_LINE_PREFIX, PhrasePicker
+from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.presses import ChildPresses, Press
 from kasparctl.game.records import (
     Button,
@@ -67,6 +75,7 @@ from kasparctl.game.records import (
     UndoRecord,
 )
 from kasparctl.game.researcher import (
+    SILENT,
     SPOKEN_FIRST,
     TRIGGERS,
     Facts,
@@ -75,7 +84,14 @@ from kasparctl.game.researcher import (
     gesture_name,
     gesture_needs,
 )
-from kasparctl.game.session import EventLog, Session, StorageFailed, record_to_plain
+from kasparctl.game.scripts import LEGACY_SCRIPT, Script, script
+from kasparctl.game.session import (
+    EventLog,
+    Session,
+    StorageFailed,
+    frozen_learner,
+    record_to_plain,
+)
 from kasparctl.game.speech import Speech, VoiceFailed
 from kasparctl.game.stages import (
     ENDS,
@@ -86,7 +102,7 @@ from kasparctl.game.stages import (
     Conditions,
     bound_transitions,
 )
-from kasparctl.game.state import GameState
+from kasparctl.game.state import GameState, far_from
 from kasparctl.game.trial import Answer, TrialPlan, plan_trial, question_record, score_answer
 from kasparctl.log import bind_context
 from kasparctl.vocabulary import Command
@@ -100,10 +116,18 @@ STEP_CANCEL_GRACE_S = 1.0
 UNWRITTEN_LIMIT = 200
 # The stages each kind of fault stops (into the fault stage); in the others it is
 # recorded and said, and the stage stays. A lost keyfob stops a running step only.
-STOPPED_BY = {
+STOPPED_BY: dict[FaultSource, tuple[str, ...]] = {
     kind: ("idle", *FAULTABLE, "paused") if kind is not FaultSource.KEYFOB else FAULTABLE
     for kind in FaultSource
 }
+# The researcher's own device going away stops nothing: their commands go to the
+# children's keyfob as holds meanwhile.
+STOPPED_BY[FaultSource.RESEARCHER] = ()
+# How long Kaspar takes to turn to its listening pose.
+LISTEN_MOVE_S = 0.4
+# The phrase key whose clip is the listening sound ([voice.clips]).
+LISTENING_SOUND = "cue.listening"
+
 
 RecordT = TypeVar("RecordT", bound=Record)
 OpenedSession = tuple[Session, SessionPlan, GameState]
@@ -128,8 +152,41 @@ class HardwareFault:
     error: Exception | None = None
 
 
+@dataclass(frozen=True, slots=True)
+class FromResearcher:
+    """An event of the researcher's own device (a command key, or the device lost or back)."""
+
+    event: InputEvent
+
+
 # What the run loop takes, one at a time.
-GameInput = Gesture | KeyfobLost | KeyfobBack | StepEnded | HardwareFault
+GameInput = Gesture | KeyfobLost | KeyfobBack | StepEnded | HardwareFault | FromResearcher
+
+
+def planned(config: Config, plan: SessionPlan, seed: int | None) -> dict[str, Any]:
+    """A session's plan.json (less its id and creation time, which Session.create adds).
+
+    The group, its session number, the condition, the variant, the learner's seed,
+    the uncertainty script and its version, and the plan entry itself.
+    """
+    chosen = script(config.script(plan))
+    return {
+        "group": plan.group,
+        "number": plan.number,
+        "condition": plan.condition,
+        "variant": config.game.variant,
+        "seed": seed,
+        "script": chosen.name,
+        "script_version": chosen.version,
+        "plan": msgspec.to_builtins(plan),
+        # Frozen at the start: a resume uses these, whatever the configuration says then.
+        "learner": frozen_learner(plan.profile, config.profile(plan.profile)),
+    }
+
+
+def session_script(session: Session) -> Script:
+    """The script a session was planned with; the five varied bands before scripts existed."""
+    return script(str(session.plan.get("script", LEGACY_SCRIPT)))
 
 
 class Game:
@@ -173,12 +230,16 @@ class Game:
         open_session: Callable[[], OpenedSession],
         resumed: OpenedSession | None = None,
         *,
+        stopped: OpenedSession | None = None,
         event_log: EventLog | None = None,
         startup_faults: Sequence[HardwareFault] = (),
         known_problems: Mapping[FaultSource, str] | None = None,
         unwritten: Sequence[tuple[Session | EventLog, Record, float]] = (),
     ) -> None:
         """A game that opens its session with `open_session` at the start, or resumes `resumed`.
+
+        `stopped` is a session the researcher stopped and has not closed: in idle their
+        "next" reopens it where it stopped, their "stop" closes it for good.
 
         While no session is open its records go to `event_log` (with none, they are
         only logged). `startup_faults` happened before the game (a servo that did not
@@ -215,9 +276,16 @@ class Game:
         self._seen_faults: set[Fault] = set()
         self.listeners: list[Listener] = []
         self.commands = commands_by_gesture(self.settings.commands)
+        self.researcher = config.researcher
+        self.stopped_waiting = stopped
+        self.script = script(config.game.script)
+        self._use_script(self.script)  # the configured script's words, until a session opens
+        # A request to show a bag was asked, and one shown far from before is asked again.
+        self._requests_in_step = 0
         initial = "idle"
         if resumed is not None:
             self.session, self.plan, self.session_state = resumed
+            self._use_script(session_script(self.session))
             step = self.session_state.step
             initial = step if step in STATES else "idle"
             if self.session_state.paused and initial in PAUSABLE:
@@ -247,8 +315,9 @@ class Game:
             plays_names=self.settings.variant == "names",
             bags_taught=state is not None and state.bags_taught(self.settings),
             all_done=state is not None and state.all_done,
-            # A paused or faulted step is the session's step: no second record of it.
-            resume_step=state.step if state is not None else "idle",
+            # A paused or faulted step is the session's step: no second record of it; a
+            # stopped session reopened goes back to the step it was stopped in.
+            resume_step=_resume_step(state),
         )
 
     # -- the run loop -----------------------------------------------------------
@@ -256,6 +325,8 @@ class Game:
     async def run(self) -> str:
         """Play until the session is finished or stopped; returns the final stage."""
         readers = [asyncio.create_task(self._read_keyfob(), name="keyfob reader")]
+        if self.hw.researcher is not None and self.researcher.source == "device":
+            readers.append(asyncio.create_task(self._read_researcher(), name="researcher reader"))
         # The HAL latches faults and takes the safe action itself; the game only has
         # to stop the step and say so, once per fault, including any latched already
         # (those stop the game before it begins: it never shows idle with them).
@@ -264,7 +335,7 @@ class Game:
             if fault not in self._seen_faults:
                 self._seen_faults.add(fault)
                 self._startup_faults += (_servo_fault(fault),)
-        self.hw.keyfob.set_needs(gesture_needs(self.commands))
+        self._set_keyfob_needs()
         try:
             try:
                 await self._begin()
@@ -350,7 +421,9 @@ class Game:
             log.critical("the fault could not be handled", fault=fault.detail, exc_info=again)
 
     async def _handle(self, event: GameInput) -> None:
-        if isinstance(event, Gesture):
+        if isinstance(event, FromResearcher):
+            await self._on_researcher_input(event.event)
+        elif isinstance(event, Gesture):
             await self._on_gesture(event)
         elif isinstance(event, StepEnded):
             await self._on_step_ended(event)
@@ -376,6 +449,56 @@ class Game:
         while True:
             await self._inputs.put(await self.hw.keyfob.next_event())
 
+    async def _read_researcher(self) -> None:
+        device = self.hw.researcher
+        assert device is not None
+        while True:
+            await self._inputs.put(FromResearcher(await device.next_event()))
+
+    # -- where the researcher's commands come from ---------------------------------
+
+    def commands_on_keyfob(self) -> bool:
+        """The researcher's commands are holds on the children's keyfob: there is no
+        device of their own, or it is away."""
+        source = self.researcher.source
+        if source == "keyfob":
+            return True
+        if source == "keypad":
+            return False
+        device = self.hw.researcher
+        return device is None or not device.connected
+
+    def _set_keyfob_needs(self) -> None:
+        if self.commands_on_keyfob():
+            self.hw.keyfob.set_needs(gesture_needs(self.commands, self.researcher.hold_s))
+        else:
+            # Nothing the children do is a command: every key-down is a press, at once.
+            self.hw.keyfob.set_needs(ANSWERS_ONLY)
+
+    async def _on_researcher_input(self, event: InputEvent) -> None:
+        if isinstance(event, KeyfobLost):
+            self._record(HalRecord(event=HalEvent.RESEARCHER_LOST, reason=event.reason))
+            first = FaultSource.RESEARCHER not in self.problems
+            self._set_problem(FaultSource.RESEARCHER, f"researcher's device: {event.reason}")
+            self._set_keyfob_needs()
+            if first:
+                self.speech.announce_soon("fault.researcher_lost")
+            return
+        if isinstance(event, KeyfobBack):
+            self._record(HalRecord(event=HalEvent.RESEARCHER_BACK, device=event.device))
+            self._set_problem(FaultSource.RESEARCHER, None)
+            self._set_keyfob_needs()
+            self.speech.announce_soon("fault.researcher_back")
+            return
+        if event.kind is GestureKind.COMMAND and event.button in tuple(Command):
+            await self._on_command(Command(event.button), event.button, event.at, "researcher")
+            return
+        self._record(
+            PressRecord(
+                button=event.button, gesture=gesture_name(event), at=event.at, ignored="no command"
+            )
+        )
+
     def _fault_latched(self, fault: Fault) -> None:
         if fault not in self._seen_faults:
             self._seen_faults.add(fault)
@@ -384,31 +507,58 @@ class Game:
     # -- gestures ---------------------------------------------------------------
 
     async def _on_gesture(self, gesture: Gesture) -> None:
+        """A gesture of the children's keyfob: their answer, or (a hold, on one keyfob
+        only, begun while nobody is asked) the researcher's command."""
         if gesture.kind is GestureKind.PRESS and gesture.button in ("green", "red"):
-            not_an_answer = self.presses.press(gesture.button, gesture.at, self.stage)
-            if not_an_answer is not None:
-                self._record(not_an_answer)
+            self._child_press(gesture.button, gesture.at)
             return
         name = gesture_name(gesture)
-        command = self.commands.get(name)
-        if command is None:
-            ignored = "no command"
-            self._record(
-                PressRecord(button=gesture.button, gesture=name, at=gesture.at, ignored=ignored)
-            )
+        if gesture.kind is GestureKind.COMMAND:
+            # An extra key of the children's keypad ([keyfob.commands]).
+            if self.researcher.source == "keypad" and gesture.button in tuple(Command):
+                await self._on_command(Command(gesture.button), name, gesture.at, "keypad")
+            else:
+                ignored = PressRecord(
+                    button=gesture.button, gesture=name, at=gesture.at, ignored="no command"
+                )
+                self._record(ignored)
             return
-        await self._on_command(command, name, gesture.at)
+        # A hold, a chord or a double: the children's, or the researcher's on one keyfob.
+        button = gesture.first if gesture.kind is GestureKind.BOTH else gesture.button
+        command = self.commands.get(name) if self.commands_on_keyfob() else None
+        if command is None or self.presses.asking_at(gesture.at):
+            self._child_gesture(button or "green", name, gesture.at)
+            return
+        await self._on_command(command, name, gesture.at, "keyfob")
 
-    async def _on_command(self, command: Command, gesture: str, at: float) -> None:
+    def _child_press(self, button: str, at: float) -> None:
+        outcome = self.presses.press(button, at, self.stage, self._now())
+        if outcome.record is not None:
+            self._record(outcome.record)
+        if outcome.acknowledge:
+            self.speech.announce_soon("listen.wait")
+
+    def _child_gesture(self, button: str, name: str, at: float) -> None:
+        """A child's hold or squeeze: its first key-down is a press like any other (the
+        answer, if one is awaited), and what it went on to be is recorded, never acted on."""
+        answering = self.presses.waiting
+        self._child_press(button, at)
+        if answering and not self.presses.waiting:
+            self._record(self.presses.extra(button, at, gesture=name))
+
+    async def _on_command(self, command: Command, gesture: str, at: float, source: str) -> None:
         stage = self.stage
         state = self.session_state
         facts = Facts(
             self.conditions(),
             undo_available=state is not None and state.undo is not None,
             hardware_ready=self.hw.keyfob.connected,
+            stopped_waiting=self.stopped_waiting is not None and self.session is None,
         )
         key = confirmation(stage, command, facts)
-        given = CommandRecord(command=command, gesture=gesture, at=at, state=stage, applied=False)
+        given = CommandRecord(
+            command=command, gesture=gesture, at=at, state=stage, applied=False, source=source
+        )
         if key is None:
             self._record(msgspec.structs.replace(given, ignored="does not apply"))
             return
@@ -418,6 +568,14 @@ class Game:
             await self.speech.announce("fault.problem")
             return
         applied = msgspec.structs.replace(given, applied=True, confirm=key)
+        if key is Confirmation.CLOSE:
+            try:
+                self._close_stopped(applied)
+            except StorageFailed as error:
+                await self._on_fault(HardwareFault(FaultSource.STORAGE, str(error), error=error))
+                return
+            await self.speech.announce("confirm.close")
+            return
         opens_session = key is Confirmation.START and self.session is None
         try:
             if command is Command.PAUSE and state is not None:
@@ -448,7 +606,7 @@ class Game:
             for outcome in outcomes:
                 if isinstance(outcome, BaseException):
                     raise outcome
-        elif key not in SPOKEN_FIRST:
+        elif key not in SPOKEN_FIRST and key not in SILENT:
             await self.speech.announce(f"confirm.{key}")
 
     async def _fire(self, key: Confirmation) -> None:
@@ -456,9 +614,41 @@ class Game:
             await self._undo()
             return
         if key is Confirmation.START and self.session is None:
+            if self.stopped_waiting is not None:
+                await self._reopen_stopped()
+                await self.trigger("reopen")
+                return
             # A session resumed before its first step has one already.
             await self._start_session()
         await self.trigger(TRIGGERS[key])
+
+    async def _reopen_stopped(self) -> None:
+        """The stopped session carries on: its step again, from where it was stopped."""
+        assert self.stopped_waiting is not None
+        session, plan, state = self.stopped_waiting
+        self.stopped_waiting = None
+        self.session, self.plan, self.session_state = session, plan, state
+        self._use_script(session_script(session))
+        bind_context(session=session.id)
+        self._record(
+            SessionRecord(event=SessionEvent.RESUMED, step=_resume_step(state), trials=state.trials)
+        )
+        self._emit(GameEvent.SESSION, session=session.id)
+        # The children may be new to Kaspar today: the greeting first, as at any start.
+        await self.speech.announce("session.greeting")
+
+    def _close_stopped(self, command: CommandRecord) -> None:
+        """The stopped session is closed for good: its plan is done."""
+        assert self.stopped_waiting is not None
+        session = self.stopped_waiting[0]
+        self.stopped_waiting = None
+        session.record(command, self._now())
+        session.record(SessionRecord(event=SessionEvent.CLOSED), self._now())
+        session.close()
+
+    def _use_script(self, chosen: Script) -> None:
+        self.script = chosen
+        self.picker.fixed = chosen.fixed
 
     async def _rest_safely(self) -> None:
         try:
@@ -502,6 +692,7 @@ class Game:
             shutil.rmtree(session.directory, ignore_errors=True)
             raise
         self.session, self.plan, self.session_state = session, plan, state
+        self._use_script(session_script(session))
         bind_context(session=session.id)
         self._set_problem(FaultSource.STORAGE, None)
         self._emit(GameEvent.SESSION, session=session.id)
@@ -536,6 +727,7 @@ class Game:
         await self._cancel_step()
 
     def _start_step(self, step: str) -> None:
+        self._requests_in_step = 0
         runners: dict[str, Callable[[], Coroutine[Any, Any, None]]] = {
             "placing": self._step_placing,
             "teaching": self._step_teaching,
@@ -569,7 +761,7 @@ class Game:
                     "a step carried on after being cancelled; cancelling again",
                     step=task.get_name(),
                 )
-        self.presses.close()
+        self.presses.close(self._now())
 
     async def _on_step_ended(self, event: StepEnded) -> None:
         if event.step != self.stage:
@@ -614,8 +806,11 @@ class Game:
         self._said_in_fault.add(fault.kind)
         # Said while the game goes on listening: the keyfob coming back, the researcher's
         # resume or stop are heard before the line ends.
-        # The children hear no joint or device: STATUS= and the records name them.
-        if fault.kind is FaultSource.KEYFOB:
+        # Words for the children; the joint, the bus and the reason are in the record,
+        # the journal and STATUS=.
+        if fault.kind is FaultSource.SERVO:
+            self.speech.announce_soon("fault.servo")
+        elif fault.kind is FaultSource.KEYFOB:
             self.speech.announce_soon("fault.keyfob_lost")
         elif fault.kind is FaultSource.STORAGE:
             self.speech.announce_soon("fault.storage")
@@ -651,52 +846,123 @@ class Game:
     # -- the steps --------------------------------------------------------------
 
     async def _step_placing(self) -> None:
+        # The greeting first: the researcher's start has no words of its own.
         await self.speech.say("session.greeting")
-        await self.speech.say("steps.place_bags")
-        self._emit(GameEvent.WAITING_FOR_RESEARCHER, step="placing")
-        await asyncio.Event().wait()  # the researcher's "next" moves on
+        await self.speech.say("steps.place_bags", bags=str(len(self.settings.targets)))
+        await self._wait_for_researcher("placing")
 
     async def _step_revealing(self) -> None:
         await self.speech.say("steps.reveal_toys")
-        self._emit(GameEvent.WAITING_FOR_RESEARCHER, step="revealing")
-        await asyncio.Event().wait()
+        await self._wait_for_researcher("revealing")
+
+    async def _wait_for_researcher(self, step: str) -> None:
+        """Wait for the researcher's "next"; after a long quiet, say once that Kaspar is ready."""
+        self._emit(GameEvent.WAITING_FOR_RESEARCHER, step=step)
+        delay = self.settings.step_prompt_after_s
+        await asyncio.sleep(delay)
+        self._record(PromptRecord(line="steps.ready", waited=delay))
+        self._emit(GameEvent.PROMPT, line="steps.ready")
+        await self.speech.say("steps.ready")
+        await asyncio.Event().wait()  # the researcher's "next" moves on
 
     async def _step_teaching(self) -> None:
         state = self._require_state()
         group = self.settings.pointing_group
         if state.teach_round == 0 and state.teach_bag == 0:
             await self.speech.say("steps.teach_pointing")
+            await self.speech.say("instructions.teach")
         await self.hw.servos.set_compliant(group, True)
         try:
             while state.teach_round < self._group_size():
-                if state.teach_bag == 0 and state.teach_round > 0:
-                    await self.speech.say("teach.swap_roles")
-                await self._teach_one_bag(state.teach_bag, group)
+                await self._teach_one_bag(state.teach_bag, state.teach_round, group)
         finally:
             # Torque back on holding where the arm is, also on pause or fault. If the
             # arm was left outside its safe range this fails, and the step fails
             # into the fault state: the researcher moves the arm back and resumes.
             await asyncio.shield(self.hw.servos.set_compliant(group, False))
-        await self.speech.say("teach.all_bags_done")
+        await self.speech.say("teach.all_done")
 
-    async def _teach_one_bag(self, bag: int, group: str) -> None:
-        round_before = self._require_state().teach_round
+    def roles(self, teach_round: int) -> tuple[str, str]:
+        """Who moves the arm and who presses in a round of step 2: every child does each
+        job once over the rounds (one round per child); a child alone does both."""
+        size = self._group_size()
+        return self._child_name(teach_round % size), self._child_name((teach_round + 1) % size)
+
+    async def _say_roles(self, teach_round: int) -> None:
+        mover, presser = self.roles(teach_round)
+        if mover == presser:
+            await self.speech.say("teach.roles_alone", mover=mover)
+        else:
+            await self.speech.say("teach.roles", mover=mover, presser=presser)
+
+    async def _teach_one_bag(self, bag: int, teach_round: int, group: str) -> None:
+        """Ask for one bag's pose until a child shows it; a pose far from where the bag
+        was shown before is asked for once more (both count for the median)."""
+        mover, presser = self.roles(teach_round)
+        number = str(bag + 1)
+        checked = False
+        retry: str | None = None
         while True:
-            await self.speech.say("teach.move_arm", bag=str(bag + 1))
-            self._emit(GameEvent.TEACH, bag=bag, round=round_before)
-            button, at = await self._wait_for_press()
-            if button == "green":
-                pose = await self.hw.servos.read_positions(group)
-                outside = self._outside_safe_range(pose)
-                if not outside:
-                    self._change(PoseRecord(bag=bag, round=round_before, pose=pose, at=at))
-                    await self.speech.say("teach.pose_logged", bag=str(bag + 1))
-                    return
+            opened = self.presses.open(self._now())
+            self._emit(
+                GameEvent.ASKING, bag=bag, round=teach_round, mover=mover, presser=presser
+            )
+            if retry is not None:
+                await self.speech.say(retry, bag=number)
+            elif self._requests_in_step == 0 or bag == 0:
+                # A round's first request (or the first after a pause) says who does what.
+                if bag == 0 and teach_round > 0:
+                    await self.speech.say("teach.swap")
+                await self._say_roles(teach_round)
+                await self.speech.say("teach.bag_first", bag=number)
+            else:
+                await self.speech.say("teach.bag", bag=number)
+            self._requests_in_step += 1
+            self.presses.asked(self._now())
+            self._emit(GameEvent.TEACH, bag=bag, round=teach_round, mover=mover, presser=presser)
+            button, at = await self._wait_with_prompts(
+                opened,
+                (
+                    ("prompt.teach", {"presser": presser, "bag": number}),
+                    ("instructions.teach", {}),
+                    ("prompt.ask_researcher", {}),
+                ),
+            )
+            self.presses.answered(at, None)
+            if button != "green":
+                self._record(PressRecord(button=button, at=at, teach_retry=bag))
+                retry = "teach.try_again"
+                continue
+            pose = await self.hw.servos.read_positions(group)
+            outside = self._outside_safe_range(pose)
+            if outside:
                 # Kaspar could never point there: ask again rather than log it.
                 self._record(PressRecord(button=button, at=at, teach_retry=bag, outside=outside))
+                retry = "teach.out_of_reach"
+                continue
+            state = self._require_state()
+            shown = _shown(state, self.settings.targets[bag])
+            far = not checked and bool(far_from(pose, shown, self.settings.pose_check_deg))
+            self._change(
+                PoseRecord(
+                    bag=bag,
+                    round=teach_round,
+                    pose=pose,
+                    at=at,
+                    rule="median",
+                    mover=mover,
+                    presser=presser,
+                    check_again=True if far else UNSET,
+                )
+            )
+            if far:
+                checked, retry = True, "teach.check_again"
+                continue
+            if bag == 0 and teach_round == 0:
+                await self.speech.say("teach.logged_first", bag=number)
             else:
-                self._record(PressRecord(button=button, at=at, teach_retry=bag))
-            await self.speech.say("teach.try_again", bag=str(bag + 1))
+                await self.speech.say("teach.logged")
+            return
 
     def _outside_safe_range(self, pose: dict[str, float]) -> list[str]:
         ranges = {joint.name: joint.range_deg for joint in self.config.servos.joints}
@@ -709,16 +975,22 @@ class Game:
     async def _step_guessing(self) -> None:
         state = self._require_state()
         if state.trials == 0:
-            pilot = self.settings.variant == "pilot"
-            await self.speech.say("session.intro_pilot" if pilot else "steps.guessing")
+            if self.settings.variant == "pilot":
+                # The pilot starts here: the greeting first.
+                await self.speech.say("session.greeting")
+                await self.speech.say("steps.pilot")
+            else:
+                await self.speech.say("steps.guessing")
+            await self.speech.say("instructions.buttons")
         while not state.all_done:
             await self._one_trial(state)
 
     async def _step_farewell(self) -> None:
         state = self._require_state()
         if all(p.learned is not None for p in state.progress):
-            await self.speech.say("react.all_learned")
-        await self.speech.say("session.farewell")
+            pilot = self.settings.variant == "pilot"
+            await self.speech.say("react.all_learned_pilot" if pilot else "react.all_learned")
+        await self.speech.say("session.thanks")
         await self.hw.servos.rest()
 
     # -- one guess --------------------------------------------------------------
@@ -728,43 +1000,85 @@ class Game:
         session_plan = self._require_plan()
         params = self.config.profile(session_plan.profile)
         group_size = self._group_size()
-        plan = plan_trial(state, params, self.settings, session_plan, group_size, self.speech.book)
+        book = self.speech.book
+        plan = plan_trial(state, params, self.settings, session_plan, group_size, book, self.script)
         bind_context(trial=plan.trial, target=plan.target_name)
         self._record(question_record(plan))  # history only: the open question, for readers
-        # Presses from here until the question is finished are recorded and ignored.
-        answer = self.presses.open()
-        await self.speech.say("turn.child", child=plan.child)
-        await self._point_at(plan.target_name)
+        # From here a press is early, until the guess itself is said.
+        answer = self.presses.open(self._now())
+        self._emit(
+            GameEvent.ASKING,
+            target=plan.target,
+            choice=plan.choice,
+            trial=plan.trial,
+            child=plan.child,
+        )
+        if group_size > 1 and state.turn < group_size:
+            await self.speech.say("turn.first", child=plan.child)  # each child's first turn
         spoken = await self._ask(plan)
         self.presses.asked(self._now())
-        self._emit(GameEvent.QUESTION, target=plan.target, choice=plan.choice, trial=plan.trial)
-        button, pressed_at = await self._wait_for_answer(answer)
-        heard = Answer(spoken, self.presses.question_end, cast(Button, button), pressed_at)
+        self._emit(
+            GameEvent.QUESTION,
+            target=plan.target,
+            choice=plan.choice,
+            trial=plan.trial,
+            child=plan.child,
+        )
+        listened = await self._listen() if self.presses.waiting else None
+        button, pressed_at = await self._wait_with_prompts(
+            answer,
+            (
+                ("instructions.buttons", {}),
+                ("prompt.answer_again", {"child": plan.child}),
+                ("prompt.ask_researcher", {}),
+            ),
+        )
+        question_end = self.presses.question_end
+        heard = Answer(
+            spoken, question_end, cast(Button, button), pressed_at, pressed_at < question_end
+        )
         scored = score_answer(plan, heard, state, params, self.settings, session_plan)
         record = self._change(scored)
         self.presses.answered(pressed_at, record.trial)
         self._emit(GameEvent.ANSWERED, trial=record.trial, feedback=button)
-        await self._react(record.green)
-        if record.learned:
-            if self.settings.variant == "pilot":
-                where = plan.target_name
-                await self.speech.say("react.learned_pilot", toy=plan.toy, location=where)
-            else:
-                await self.speech.say("react.learned", toy=plan.toy)
-        elif state.progress[plan.target].given_up:
-            await self.speech.say("prompt.ask_researcher")
+        await self._react(plan, record.green, record.learned, listened)
+        if state.progress[plan.target].given_up:
+            await self.speech.say("react.given_up")
 
     async def _ask(self, plan: TrialPlan) -> tuple[str, ...]:
-        """How sure Kaspar is (if the plan says it), then its guess; the lines it said."""
-        say = self.speech.say
+        """Point while saying how sure (if the plan says it), then the guess; the lines said.
+
+        From the guess on, a press is the answer: it is the question's last words.
+        """
         spoken: list[str] = []
-        if plan.band is not None:
-            spoken.append(await say(BAND_LINE_PREFIX + plan.band))
-        if self.settings.variant == "pilot":
-            spoken.append(await say("guess.pilot", toy=plan.toy, location=plan.target_name))
+        key = plan.uncertainty_line
+        if key is not None:
+            said, _ = await asyncio.gather(self.speech.say(key), self._point_at(plan.target_name))
+            spoken.append(said)
         else:
-            spoken.append(await say("guess.names", toy=plan.toy))
+            await self._point_at(plan.target_name)
+        self.presses.last_words(self._now())
+        if self.settings.variant == "pilot":
+            spoken.append(
+                await self.speech.say(
+                    "guess.pilot", child=plan.child, toy=plan.toy, where=self._where(plan)
+                )
+            )
+        else:
+            spoken.append(await self.speech.say("guess.names", child=plan.child, toy=plan.toy))
         return tuple(spoken)
+
+    def _where(self, plan: TrialPlan) -> str:
+        """How the pilot location of `plan` is said in a sentence ("on the shelf")."""
+        location = plan.target_name
+        phrase = self.settings.location_phrases.get(location)
+        return phrase or self.speech.book.fill("names.where", location=location)
+
+    def _child_name(self, index: int) -> str:
+        children = self._require_plan().children
+        if children:
+            return children[index]
+        return self.speech.book.fill("names.child", number=str(index + 1))
 
     async def _undo(self) -> bool:
         state = self._require_state()
@@ -776,20 +1090,54 @@ class Game:
         self._start_step("guessing")
         return True
 
-    async def _react(self, green: bool) -> None:
+    async def _react(
+        self, plan: TrialPlan, green: bool, learned: bool, listened: dict[str, float] | None
+    ) -> None:
+        """What the answer means, in words that agree with the learned rule, and the face."""
+        pilot = self.settings.variant == "pilot"
+        if green and learned:
+            key = "react.learned"
+        elif green:
+            key = "react.right_check"
+        else:
+            key = "react.wrong"
+        values = {"toy": plan.toy}
+        if pilot:
+            key += "_pilot"
+            values["where"] = self._where(plan)
         expression = self.settings.happy_pose if green else self.settings.sad_pose
-        line = self.speech.say("react.happy" if green else "react.sad")
-        if not expression:
-            await line
-            return
-        # Face and words together; gather cancels both with the step and
-        # retrieves a servo error from either, so none is left unheard.
-        await asyncio.gather(line, self._express(dict(expression)))
+        # Face and words together; gather cancels both with the step and retrieves a
+        # servo error from either, so none is left unheard.
+        await asyncio.gather(
+            self.speech.say(key, **values), self._face(listened, dict(expression))
+        )
+
+    async def _face(self, listened: dict[str, float] | None, expression: dict[str, float]) -> None:
+        """Back from listening, then the expression (held briefly, then undone)."""
+        if listened:
+            await self.hw.servos.move(listened, duration=LISTEN_MOVE_S)
+        if expression:
+            await self._express(expression)
 
     async def _express(self, pose: dict[str, float]) -> None:
         before = await self.hw.servos.read_positions()
         await self.hw.servos.move(pose, duration=0.6)
         await self.hw.servos.move({joint: before[joint] for joint in pose}, duration=0.6)
+
+    async def _listen(self) -> dict[str, float] | None:
+        """Show that Kaspar listens: its listening pose and sound, where configured.
+
+        Returns where the posed joints were, to go back to once answered.
+        """
+        self._emit(GameEvent.LISTENING)
+        if LISTENING_SOUND in self.config.voice.clips:
+            self.speech.sound_soon(LISTENING_SOUND)
+        pose = self.settings.listening_pose
+        if not pose:
+            return None
+        before = await self.hw.servos.read_positions()
+        await self.hw.servos.move(dict(pose), duration=LISTEN_MOVE_S)
+        return {joint: before[joint] for joint in pose if joint in before}
 
     async def _point_at(self, target_name: str) -> None:
         state = self._require_state()
@@ -800,22 +1148,26 @@ class Game:
 
     # -- waiting for children ---------------------------------------------------
 
-    async def _wait_for_press(self) -> Press:
-        return await self.presses.open(question_end=self._now())
-
-    async def _wait_for_answer(self, answer: asyncio.Future[Press]) -> Press:
-        """The first green or red after the question; prompts while nobody answers."""
-        prompts = ("prompt.nobody_first", "prompt.nobody_second", "prompt.ask_researcher")
+    async def _wait_with_prompts(
+        self,
+        answer: asyncio.Future[Press],
+        prompts: Sequence[tuple[str, Mapping[str, str]]],
+    ) -> Press:
+        """The first green or red that answers; prompts while nobody does, the last one
+        asking for a grown-up (who may then use the keyfob's holds, if they have no
+        device of their own)."""
         delays = self.settings.prompt_after_s
-        for index, key in enumerate(prompts):
+        for index, (key, values) in enumerate(prompts):
             delay = delays[min(index, len(delays) - 1)]
             with contextlib.suppress(TimeoutError):
                 # Not wait_for: on Python 3.11 it can drop a pause that lands as the answer does.
                 async with asyncio.timeout(delay):
                     return await asyncio.shield(answer)
+            if index == len(prompts) - 1:
+                self.presses.hand_to_researcher(self._now())
             self._record(PromptRecord(line=key, waited=delay))
             self._emit(GameEvent.PROMPT, line=key)
-            await self.speech.say(key)
+            await self.speech.say(key, **values)
         return await answer
 
     # -- speaking, recording ----------------------------------------------------
@@ -926,6 +1278,21 @@ def _describe(event: GameInput) -> str:
     if isinstance(event, HardwareFault):
         return f"handling a {event.kind.value} fault"
     return f"handling the keyfob {'lost' if isinstance(event, KeyfobLost) else 'back'}"
+
+
+def _resume_step(state: GameState | None) -> str:
+    """Where a resume (or a reopen) returns to: the session's step, or the one it stopped in."""
+    if state is None:
+        return "idle"
+    if state.step == "stopped" and isinstance(state.stopped_from, str):
+        return state.stopped_from
+    return state.step
+
+
+def _shown(state: GameState, target: str) -> list[dict[str, float]]:
+    """Every pose shown for `target` so far (under the median rule)."""
+    shown = state.shown_poses
+    return [] if isinstance(shown, msgspec.UnsetType) else list(shown.get(target, []))
 
 
 def _servo_fault(fault: Fault) -> HardwareFault:

@@ -1,10 +1,22 @@
 """What Kaspar says: phrases/<language>.toml into a validated, frozen phrase book.
 
-Every line Kaspar can say has a dotted key ("react.happy") with a fixed set of
-placeholders, listed once in REQUIRED_LINES. A file is checked completely when
-it is loaded, so a typo in a placeholder fails `kasparctl check` at the desk
+Every line Kaspar can say has a dotted key ("react.wrong") with a fixed set of
+placeholders, listed once in REQUIRED_LINES with the limits it keeps and what
+it is for (translators read that table). A file is checked completely when it
+is loaded, so a typo in a placeholder fails `kasparctl check` at the desk
 instead of in front of children. Errors name the file and the key, in the same
 "FILE: KEY: expected X, found Y" style as kasparctl.config.
+
+A key's first wording is the one the fixed script (`paper`, the default) says,
+every time; the varied script picks among all of them, never the same twice
+in a row. Lines are brief and literal: every sentence at most
+MAX_SENTENCE_WORDS words, a line at most its LineSpec.max_sentences sentences
+(two in step 4); `limit_problems` checks a book against them, in any language
+(`sentences` splits French, German, Dutch and Italian as well as English).
+
+How sure Kaspar is comes from kasparctl.game.scripts (the levels and their
+limits are the study's, the same in every language); the book only words each
+level, as the keys "uncertainty.<level>".
 
 The book itself is immutable and takes an explicit random generator, so
 simulations are reproducible; the only state, which variant was said last,
@@ -15,8 +27,6 @@ from __future__ import annotations
 
 import difflib
 import importlib.resources
-import itertools
-import math
 import re
 import string
 import tomllib
@@ -27,6 +37,16 @@ from types import MappingProxyType
 from typing import Any, Final, NoReturn
 
 import numpy as np
+
+from kasparctl.game.scripts import (
+    ALL_LEVELS,
+    DEFAULT_SCRIPT,
+    LAST_ONE,
+    LINE_PREFIX,
+    SCRIPTS,
+    SURE_LEFT,
+)
+from kasparctl.game.scripts import Band as Band  # figures shade a script's bands
 
 
 class PhraseError(Exception):
@@ -40,100 +60,113 @@ class PhraseError(Exception):
         self.message = message
 
 
+# Every sentence Kaspar says has at most this many words (placeholders filled in).
+MAX_SENTENCE_WORDS: Final = 12
+# Step 4 is said again and again: its lines are at most two sentences.
+STEP4_SENTENCES: Final = 2
+
+
 @dataclass(frozen=True, slots=True)
 class LineSpec:
-    """What a line may contain, and how varied the shipped English file keeps it."""
+    """What a line may contain, how long it may be, and what it is for."""
 
     placeholders: frozenset[str] = frozenset()
     # Variants the shipped English file provides at least (checked by the tests,
-    # not on load, so a new translation can start small).
-    variety: int = 3
+    # not on load, so a new translation can start with one wording per key).
+    variety: int = 1
+    max_sentences: int = STEP4_SENTENCES
+    about: str = ""
 
 
-def _spec(*placeholders: str, variety: int = 3) -> LineSpec:
-    return LineSpec(frozenset(placeholders), variety)
+def _spec(*placeholders: str, variety: int = 1, sentences: int = 2, about: str = "") -> LineSpec:
+    return LineSpec(frozenset(placeholders), variety, sentences, about)
 
 
-# Said before nearly every guess or answer, so they need the most variety.
-_OFTEN: Final = 5
+# Said before nearly every guess or answer: the varied script needs choices.
+_OFTEN: Final = 3
 
 # The one table of what a phrase file must contain: adding a line is one entry.
-# {bag} is the bag's number, {child} is "child one" or a first name, {joint} is
-# a joint in spoken words; values are always text.
+# Placeholders are filled with text: {bag} and {bags} a bag's number and how many
+# there are ("3", "6"); {toy} a toy's name; {location} a pilot location's name;
+# {where} how a location is said in a sentence ("in the box"); {child}, {mover},
+# {presser} a child's first name or names.child; {number} a child's number.
 REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
     {
-        "session.greeting": _spec(),
-        "session.intro_pilot": _spec(),
-        "session.resumed": _spec(),
-        "session.farewell": _spec(),
-        "session.abandoned": _spec(),
-        "steps.place_bags": _spec(),
-        "steps.teach_pointing": _spec(),
-        "steps.reveal_toys": _spec(),
-        "steps.guessing": _spec(),
-        "steps.farewell": _spec(),
-        "teach.move_arm": _spec("bag", variety=_OFTEN),
-        "teach.pose_logged": _spec("bag", variety=_OFTEN),
-        "teach.try_again": _spec("bag"),
-        "teach.swap_roles": _spec(),
-        "teach.all_bags_done": _spec(),
-        "guess.names": _spec("toy", variety=_OFTEN),
-        "guess.pilot": _spec("toy", "location", variety=_OFTEN),
-        "react.happy": _spec(variety=_OFTEN),
-        "react.sad": _spec(variety=_OFTEN),
-        "react.learned": _spec("toy"),
-        "react.learned_pilot": _spec("toy", "location"),
-        "react.all_learned": _spec(),
-        "prompt.nobody_first": _spec(),
-        "prompt.nobody_second": _spec(),
-        "prompt.ask_researcher": _spec(),
-        "turn.child": _spec("child", variety=_OFTEN),
-        "confirm.start": _spec(),
-        "confirm.next_step": _spec(),
-        "confirm.pause": _spec(),
-        "confirm.resume": _spec(),
-        "confirm.undo": _spec(),
-        "confirm.stop": _spec(),
-        "fault.servo": _spec("joint"),
-        "fault.keyfob_lost": _spec(),
-        "fault.keyfob_back": _spec(),
-        "fault.problem": _spec(),
-        "fault.storage": _spec(),
-        "fault.cleared": _spec(),
-        "uncertainty.no_idea": _spec(variety=_OFTEN),
+        "names.child": _spec(
+            "number", sentences=1, about="a child without a first name, by number"
+        ),
+        "names.where": _spec(
+            "location", sentences=1, about="a pilot location with no phrase of its own"
+        ),
+        "session.greeting": _spec(sentences=3, about="first words of a session"),
+        "session.resumed": _spec(about="a session carries on after a restart"),
+        "session.thanks": _spec(sentences=3, about="the end of a session: thanks and goodbye"),
+        "steps.place_bags": _spec("bags", about="step 1: the numbered bags go in places"),
+        "steps.teach_pointing": _spec(about="step 2 begins"),
+        "steps.reveal_toys": _spec(about="step 3: open the bags"),
+        "steps.guessing": _spec(about="step 4 begins (names)"),
+        "steps.pilot": _spec(about="step 4 begins (pilot: where the toys go)"),
+        "steps.ready": _spec(about="steps 1 and 3: Kaspar has waited a long time"),
+        "instructions.buttons": _spec(about="how to answer; again when nobody answers"),
+        "instructions.teach": _spec(about="how to show a bag; again when nobody presses"),
+        "teach.roles": _spec("mover", "presser", about="who moves the arm, who presses"),
+        "teach.roles_alone": _spec("mover", about="one child does both jobs"),
+        "teach.swap": _spec(about="the next round of step 2: new jobs"),
+        "teach.bag_first": _spec("bag", about="the first bag of a round"),
+        "teach.bag": _spec("bag", about="the next bag, shorter"),
+        "teach.logged_first": _spec("bag", about="the first bag's pose is saved"),
+        "teach.logged": _spec(about="a later bag's pose is saved, shorter"),
+        "teach.try_again": _spec("bag", about="red while showing a bag"),
+        "teach.out_of_reach": _spec("bag", about="the arm was shown where it cannot point"),
+        "teach.check_again": _spec("bag", about="shown far from where it was before"),
+        "teach.all_done": _spec(about="step 2 is over"),
+        "turn.first": _spec("child", about="a child's first turn in step 4"),
+        "guess.names": _spec("child", "toy", variety=_OFTEN, about="the question (names)"),
+        "guess.pilot": _spec(
+            "child", "toy", "where", variety=_OFTEN, about="the question (pilot)"
+        ),
+        "react.right_check": _spec(
+            "toy", variety=_OFTEN, about="green, not learned yet: Kaspar will check"
+        ),
+        "react.right_check_pilot": _spec("toy", "where", about="the same in the pilot"),
+        "react.learned": _spec("toy", variety=_OFTEN, about="green, and now it is learned"),
+        "react.learned_pilot": _spec("toy", "where", about="the same in the pilot"),
+        "react.wrong": _spec("toy", variety=_OFTEN, about="red: no promise of what comes"),
+        "react.wrong_pilot": _spec("toy", "where", about="the same in the pilot"),
+        "react.all_learned": _spec(about="every toy learned"),
+        "react.all_learned_pilot": _spec(about="every toy's place learned"),
+        "react.given_up": _spec(about="a toy not learned in its many guesses"),
+        "prompt.answer_again": _spec("child", about="nobody answers, second prompt"),
+        "prompt.teach": _spec("presser", "bag", about="nobody presses in step 2"),
+        "prompt.ask_researcher": _spec(about="the last prompt: a grown-up is needed"),
+        "listen.wait": _spec(about="a press before Kaspar finished asking"),
+        "confirm.next_step": _spec(about="the researcher moved on"),
+        "confirm.pause": _spec(about="the researcher paused"),
+        "confirm.resume": _spec(about="the researcher resumed"),
+        "confirm.undo": _spec(about="the researcher took the last answer back"),
+        "confirm.stop": _spec(sentences=3, about="the researcher stopped: thanks, goodbye"),
+        "confirm.close": _spec(about="a stopped session closed for good (no children)"),
+        "fault.servo": _spec(about="a joint failed (the joint goes to the records)"),
+        "fault.keyfob_lost": _spec(about="the children's keyfob is gone"),
+        "fault.keyfob_back": _spec(about="the children's keyfob is back"),
+        "fault.researcher_lost": _spec(about="the researcher's keypad is gone"),
+        "fault.researcher_back": _spec(about="the researcher's keypad is back"),
+        "fault.problem": _spec(about="any other fault"),
+        "fault.storage": _spec(about="the records cannot be saved: a grown-up must stop"),
+        "session.abandoned": _spec(about="an unfinished session could not be resumed"),
+        **{
+            LINE_PREFIX + level: _spec(variety=_OFTEN, about=f"uncertainty level {level}")
+            for level in ALL_LEVELS
+        },
+        LAST_ONE: _spec(variety=_OFTEN, about="varied script: only one name is left"),
+        SURE_LEFT: _spec(variety=_OFTEN, about="varied script: sure, the others were wrong"),
     }
 )
 
-# Bands are an array of tables; each band's lines are also reachable as the
-# line key "uncertainty.<name>", so they are picked like any other line.
-BANDS_KEY: Final = "uncertainty.bands"
-BAND_LINE_PREFIX: Final = "uncertainty."
-BAND_SPEC: Final = _spec(variety=_OFTEN)
-NO_IDEA: Final = "no_idea"
-_BAND_FIELDS: Final = ("name", "min", "max", "lines")
-_BAND_NAME = re.compile(r"[a-z][a-z0-9_]*")
-
-# How close to the maximum log2(n) counts as "no idea". Not 1e-9: entropies
-# arrive rounded (the paper reports 2.585 for log2(6) = 2.58496 and 1.58 for
-# log2(3)), and within 0.01 bits of uniform no listener could tell the
-# difference anyway. The same margin above log2(n) is accepted as rounding.
-NO_IDEA_TOLERANCE: Final = 0.01
-
+# Where the uncertainty levels' limits once were: the study's, now in code.
+_OLD_BANDS: Final = "uncertainty.bands"
 _LANGUAGE = re.compile(r"[A-Za-z]{2,3}(?:[_-][A-Za-z0-9]{2,8})*")
 _SHIPPED_PACKAGE: Final = "phrases"
-
-
-@dataclass(frozen=True, slots=True)
-class Band:
-    """Entropies from min (included) to max (excluded), in bits."""
-
-    name: str
-    min: float
-    max: float
-
-    def contains(self, entropy_bits: float) -> bool:
-        """Whether `entropy_bits` falls in this band."""
-        return self.min <= entropy_bits < self.max
 
 
 @dataclass(frozen=True)
@@ -142,16 +175,19 @@ class PhraseBook:
 
     source: str
     language: str
-    # Key -> variants, including "uncertainty.<band>" for every band.
+    # Key -> variants; the first is the fixed script's wording.
     lines: Mapping[str, tuple[str, ...]]
-    # Sorted from 0 up to inf.
-    bands: tuple[Band, ...]
     placeholders: Mapping[str, frozenset[str]] = field(repr=False)
 
     @property
     def keys(self) -> tuple[str, ...]:
         """Every phrase key of the book."""
         return tuple(self.lines)
+
+    @property
+    def bands(self) -> tuple[Band, ...]:
+        """The default script's levels below the maximum (for figures that shade them)."""
+        return SCRIPTS[DEFAULT_SCRIPT].bands
 
     def variants(self, key: str) -> tuple[str, ...]:
         """The lines `key` may be said with; PhraseError for a key the book lacks."""
@@ -168,47 +204,17 @@ class PhraseBook:
 
     def render(self, key: str, index: int, /, **values: str) -> str:
         """Variant `index` of `key`, filled in; values must match the key's placeholders exactly."""
+        text = self.fill(key, index, **values)
+        # A sentence may open with a placeholder ("{child}, your turn"): still a sentence.
+        return " ".join(said[:1].upper() + said[1:] for said in sentences(text, self.language))
+
+    def fill(self, key: str, index: int = 0, /, **values: str) -> str:
+        """Variant `index` of `key` filled in as it stands: for words said inside a line."""
         variants = self.variants(key)
         if not 0 <= index < len(variants):
             self._fail(key, f"expected a variant index 0 to {len(variants) - 1}, found {index}")
         self.check_values(key, values)
-        text = variants[index].format_map(values)
-        # A line may open with a placeholder ("{child}, your turn"): still a sentence.
-        return text[:1].upper() + text[1:]
-
-    def band_for(
-        self, entropy_bits: float, n_candidates: int, *, tolerance: float = NO_IDEA_TOLERANCE
-    ) -> str:
-        """The band name for an entropy over n candidates: NO_IDEA at the maximum."""
-        if n_candidates < 1:
-            self._fail("uncertainty", f"expected at least 1 candidate, found {n_candidates}")
-        if not math.isfinite(entropy_bits) or entropy_bits < -tolerance:
-            self._fail("uncertainty", f"expected an entropy >= 0 bits, found {entropy_bits}")
-        maximum = math.log2(n_candidates)
-        if entropy_bits > maximum + tolerance:
-            self._fail(
-                "uncertainty",
-                f"expected an entropy <= log2({n_candidates}) = {maximum:.4f} bits, "
-                f"found {entropy_bits}",
-            )
-        # With a single candidate there is nothing to be unsure about: 0 bits is "sure".
-        if n_candidates > 1 and entropy_bits >= maximum - tolerance:
-            return NO_IDEA
-        clamped = max(entropy_bits, 0.0)
-        # The bands cover [0, inf) without gaps (checked on load), so one always matches.
-        return next(band.name for band in self.bands if band.contains(clamped))
-
-    def uncertainty(
-        self,
-        entropy_bits: float,
-        n_candidates: int,
-        rng: np.random.Generator,
-        *,
-        tolerance: float = NO_IDEA_TOLERANCE,
-    ) -> tuple[str, str]:
-        """(band name, a line saying how sure Kaspar is), without repeat avoidance."""
-        band = self.band_for(entropy_bits, n_candidates, tolerance=tolerance)
-        return band, self.line(BAND_LINE_PREFIX + band, rng)
+        return variants[index].format_map(values)
 
     def check_values(self, key: str, values: Mapping[str, object]) -> None:
         """Raise PhraseError unless `values` fill exactly the placeholders allowed for `key`."""
@@ -232,34 +238,96 @@ class PhraseBook:
         raise PhraseError(self.source, key, message)
 
 
+# Limits ----------------------------------------------------------------------
+
+# A sentence ends at . ! ? … (or the CJK marks), with any closing quotes or
+# brackets, before white space or the end. French puts a space before ? and !
+# ("C'est le lion ?"): the mark still ends the sentence, the space before it
+# does not split anything. Decimals and times ("1.5", "10:30") have no space
+# after the point. Abbreviations ("z. B.", "bijv.") would split: lines avoid them.
+_SENTENCE_END = re.compile(
+    "[.!?\u2026\u3002\uff01\uff1f]+[\"'\u00bb\u201d\u2019)\\]]*(?=\\s|$)"
+)
+# A word holds a letter or a digit: "l'enfant", "Est-ce", "3", "1.5" are words; "?" is not.
+_WORD = re.compile("[^\\W_](?:[\\w'\u2019\\-]*[^\\W_])?(?:[.,]\\d+)*")
+
+
+def sentences(text: str, language: str = "en") -> list[str]:
+    """The sentences of a line, in order, each with its end mark.
+
+    `language` is the phrase book's: the rule is the same for the languages Kaspar
+    speaks (en, nl, de, it, fr), which all end sentences with . ! ? (French with a
+    space before ? and !); it is an argument so a language that needs its own rule
+    can have one without changing the callers.
+    """
+    del language  # one rule serves them all, for now
+    parts, start = [], 0
+    for end in _SENTENCE_END.finditer(text):
+        parts.append(text[start : end.end()].strip())
+        start = end.end()
+    parts.append(text[start:].strip())
+    return [part for part in parts if part]
+
+
+def word_count(sentence: str) -> int:
+    """The words of a sentence: runs holding a letter or digit (punctuation is no word)."""
+    return len(_WORD.findall(sentence))
+
+
+def limit_problems(book: PhraseBook, values: Mapping[str, str]) -> list[str]:
+    """Every line of `book` that breaks its limits, filled with `values`, as "key[i]: why".
+
+    `values` gives each placeholder its longest plausible text in the book's
+    language (a two-word first name, the longest toy, "on the shelf"), so the
+    limits hold for the sentences children will hear.
+    """
+    problems = []
+    for key, variants in book.lines.items():
+        spec = REQUIRED_LINES.get(key, _spec())
+        filled = {name: values[name] for name in book.placeholders[key]}
+        for index in range(len(variants)):
+            said = sentences(book.fill(key, index, **filled), book.language)
+            if len(said) > spec.max_sentences:
+                problems.append(
+                    f"{key}[{index}]: expected at most {spec.max_sentences} sentences, "
+                    f"found {len(said)}: {said}"
+                )
+            for sentence in said:
+                words = word_count(sentence)
+                if words > MAX_SENTENCE_WORDS:
+                    problems.append(
+                        f"{key}[{index}]: expected at most {MAX_SENTENCE_WORDS} words in a "
+                        f"sentence, found {words}: {sentence!r}"
+                    )
+    return problems
+
+
 class PhrasePicker:
-    """Picks lines from a book, never the same variant twice in a row for one key.
+    """Picks lines from a book: the first wording every time (`fixed`), or varied, never
+    the same variant twice in a row for one key.
 
     The memory lives here, not in the book, so one book can serve a game, a
     simulation and `kasparctl say` at once without them disturbing each other.
     """
 
-    def __init__(self, book: PhraseBook, rng: np.random.Generator) -> None:
-        """Pick from `book`, drawing with `rng`."""
+    def __init__(self, book: PhraseBook, rng: np.random.Generator, *, fixed: bool = False) -> None:
+        """Pick from `book`, drawing with `rng` (never, when `fixed`)."""
         self.book = book
+        self.fixed = fixed
         self._rng = rng
         self._last: dict[str, int] = {}
 
     def line(self, key: str, /, **values: str) -> str:
-        """A variant of `key` filled in with `values`, not the one this picker said last."""
+        """A variant of `key` filled in with `values`: the first when fixed, else not the
+        one this picker said last."""
         variants = self.book.variants(key)
         # Validate before drawing, so a bad call neither consumes randomness nor memory.
         self.book.check_values(key, values)
+        if self.fixed:
+            return self.book.render(key, 0, **values)
         index = pick_index(len(variants), self._rng, avoid=self._last.get(key))
         self._last[key] = index
         return self.book.render(key, index, **values)
-
-    def uncertainty(
-        self, entropy_bits: float, n_candidates: int, *, tolerance: float = NO_IDEA_TOLERANCE
-    ) -> tuple[str, str]:
-        """(band name, line), the line not repeating the band's previous one."""
-        band = self.book.band_for(entropy_bits, n_candidates, tolerance=tolerance)
-        return band, self.line(BAND_LINE_PREFIX + band)
 
 
 def pick_index(count: int, rng: np.random.Generator, avoid: int | None) -> int:
@@ -327,28 +395,23 @@ def parse_phrasebook(data: bytes | str, source: str, language: str = "en") -> Ph
 
     found: dict[str, Any] = {}
     _collect(document, "", found, fail)
-    for key in [*REQUIRED_LINES, BANDS_KEY]:
+    for key in REQUIRED_LINES:
         if key not in found:
             fail(key, "required key is missing")
 
     lines = {key: _check_lines(found[key], key, spec, fail) for key, spec in REQUIRED_LINES.items()}
     placeholders = {key: spec.placeholders for key, spec in REQUIRED_LINES.items()}
-    bands, band_lines = _check_bands(found[BANDS_KEY], fail)
-    for band in bands:
-        lines[BAND_LINE_PREFIX + band.name] = band_lines[band.name]
-        placeholders[BAND_LINE_PREFIX + band.name] = BAND_SPEC.placeholders
     return PhraseBook(
         source=source,
         language=language,
         lines=MappingProxyType(lines),
-        bands=bands,
         placeholders=MappingProxyType(placeholders),
     )
 
 
 Fail = Callable[[str, str], NoReturn]
 
-_KNOWN_LEAVES: Final = frozenset([*REQUIRED_LINES, BANDS_KEY])
+_KNOWN_LEAVES: Final = frozenset(REQUIRED_LINES)
 # Every table on the way to a known key, e.g. "react" for "react.happy".
 _KNOWN_TABLES: Final = frozenset(
     key.rsplit(".", depth)[0] for key in _KNOWN_LEAVES for depth in range(1, key.count(".") + 1)
@@ -361,6 +424,13 @@ def _collect(table: Mapping[str, Any], prefix: str, found: dict[str, Any], fail:
         key = f"{prefix}.{name}" if prefix else name
         if key in _KNOWN_LEAVES:
             found[key] = value
+        elif key == _OLD_BANDS:
+            fail(
+                key,
+                "the uncertainty levels and their limits are no longer in the phrase book "
+                "(they are the study's: kasparctl/game/scripts.py); give each level its "
+                f"lines as {', '.join(LINE_PREFIX + level for level in ALL_LEVELS)}",
+            )
         elif key in _KNOWN_TABLES:
             if not isinstance(value, dict):
                 fail(key, f"expected a table, found {_toml_type(value)}")
@@ -405,85 +475,6 @@ def _check_format(text: str, key: str, allowed: frozenset[str], fail: Fail) -> N
         # Speech has no use for "!r" or ":>5", and they would fail only at runtime.
         if format_spec or conversion:
             fail(key, f"expected a plain {{{name}}}, found a conversion or format spec in it")
-
-
-def _check_bands(value: Any, fail: Fail) -> tuple[tuple[Band, ...], dict[str, tuple[str, ...]]]:
-    if not isinstance(value, list):
-        fail(BANDS_KEY, f"expected an array of tables ([[{BANDS_KEY}]]), found {_toml_type(value)}")
-    if not value:
-        fail(BANDS_KEY, "expected at least one band, found none")
-    indexed: list[tuple[int, Band]] = []
-    band_lines: dict[str, tuple[str, ...]] = {}
-    for index, table in enumerate(value):
-        band, lines = _check_band(table, index, band_lines.keys(), fail)
-        indexed.append((index, band))
-        band_lines[band.name] = lines
-    _check_coverage(indexed, fail)
-    return tuple(band for _, band in sorted(indexed, key=lambda item: item[1].min)), band_lines
-
-
-def _check_band(
-    table: Any, index: int, taken: Iterable[str], fail: Fail
-) -> tuple[Band, tuple[str, ...]]:
-    where = f"{BANDS_KEY}[{index}]"
-    if not isinstance(table, dict):
-        fail(where, f"expected a table, found {_toml_type(table)}")
-    for name in table:
-        if name not in _BAND_FIELDS:
-            fail(f"{where}.{name}", f"unknown key; expected one of: {', '.join(_BAND_FIELDS)}")
-    for name in _BAND_FIELDS:
-        if name not in table:
-            fail(f"{where}.{name}", "required key is missing")
-    name = table["name"]
-    if not isinstance(name, str):
-        fail(f"{where}.name", f"expected text, found {_toml_type(name)}")
-    if not _BAND_NAME.fullmatch(name):
-        fail(f"{where}.name", f"expected a name like 'fairly_sure', found {name!r}")
-    # Band lines are reachable as "uncertainty.<name>", so a name must not shadow a key.
-    if name == NO_IDEA or BAND_LINE_PREFIX + name in _KNOWN_LEAVES:
-        fail(f"{where}.name", f"expected a name other than {name!r}, which is already a key")
-    if name in taken:
-        fail(f"{where}.name", f"expected a name not used by another band, found {name!r}")
-    low = _number(table["min"], f"{where}.min", fail)
-    high = _number(table["max"], f"{where}.max", fail)
-    if low >= high:
-        fail(f"{where}.max", f"expected more than min ({low}), found {high}")
-    lines = _check_lines(table["lines"], f"{where}.lines", BAND_SPEC, fail)
-    return Band(name, low, high), lines
-
-
-def _check_coverage(indexed: list[tuple[int, Band]], fail: Fail) -> None:
-    """Sorted by min, the bands must tile [0, inf) exactly."""
-    ordered = sorted(indexed, key=lambda item: item[1].min)
-    first_index, first = ordered[0]
-    if first.min != 0.0:
-        fail(
-            f"{BANDS_KEY}[{first_index}].min",
-            f"expected 0 (the lowest band starts at 0 bits), found {first.min}",
-        )
-    for (_, before), (index, band) in itertools.pairwise(ordered):
-        if band.min != before.max:
-            problem = "the bands overlap" if band.min < before.max else "the bands leave a gap"
-            fail(
-                f"{BANDS_KEY}[{index}].min",
-                f"expected {before.max} (where band {before.name!r} ends), "
-                f"found {band.min}: {problem}",
-            )
-    last_index, last = ordered[-1]
-    if last.max != math.inf:
-        fail(
-            f"{BANDS_KEY}[{last_index}].max",
-            f"expected inf (the highest band covers everything above it), found {last.max}",
-        )
-
-
-def _number(value: Any, key: str, fail: Fail) -> float:
-    # bool is an int in Python, but `min = true` is a mistake, not 1.
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        fail(key, f"expected a number of bits, found {_toml_type(value)}")
-    if math.isnan(value):
-        fail(key, "expected a number of bits, found nan")
-    return float(value)
 
 
 def _toml_type(value: Any) -> str:

@@ -34,6 +34,8 @@ class SessionEvent(enum.StrEnum):
     # An unfinished session that could not be resumed (its records damaged, its learner
     # profile gone...): closed for good, with the reason; the next session starts anew.
     ABANDONED = "abandoned"
+    # The researcher closed a stopped session for good: its plan is done.
+    CLOSED = "closed"
 
 
 class HalEvent(enum.StrEnum):
@@ -41,6 +43,9 @@ class HalEvent(enum.StrEnum):
 
     KEYFOB_LOST = "keyfob_lost"
     KEYFOB_BACK = "keyfob_back"
+    # The researcher's own device (a keypad) gone and back.
+    RESEARCHER_LOST = "researcher_lost"
+    RESEARCHER_BACK = "researcher_back"
     # A line that was not heard to its end (timed out or failed).
     VOICE = "voice"
 
@@ -56,6 +61,9 @@ class FaultSource(enum.StrEnum):
     # A record or snapshot that could not be written (the disk full, the state directory
     # unwritable): the game stops rather than play on unsaved.
     STORAGE = "storage"
+    # The researcher's own device is gone: nothing stops (their commands go to the
+    # children's keyfob as holds meanwhile), but it is shown and said.
+    RESEARCHER = "researcher"
 
 
 class Confirmation(enum.StrEnum):
@@ -67,6 +75,8 @@ class Confirmation(enum.StrEnum):
     RESUME = "resume"
     UNDO = "undo"
     STOP = "stop"
+    # A stop given in idle while a stopped session waits: it is closed for good.
+    CLOSE = "close"
 
 
 Button = Literal["green", "red"]
@@ -106,6 +116,9 @@ class CommandRecord(Record, tag="command", kw_only=True, frozen=True):
     applied: bool
     confirm: Confirmation | UnsetType = UNSET
     ignored: str | UnsetType = UNSET
+    # Where it came from: "researcher" (their own device), "keypad" (an extra key of
+    # the children's keypad) or "keyfob" (a hold on the children's keyfob).
+    source: str | UnsetType = UNSET
 
 
 class PressRecord(Record, tag="press", kw_only=True, frozen=True):
@@ -113,10 +126,15 @@ class PressRecord(Record, tag="press", kw_only=True, frozen=True):
 
     button: str
     at: float
-    # The gesture's name, when a researcher gesture had no command.
+    # The gesture's name: one that had no command, or what an answer's press went on to
+    # be ("long green", "both": an extra of the answer, never a command).
     gesture: str | UnsetType = UNSET
     ignored: str | UnsetType = UNSET
-    # A second press right after an answer, and the trial it followed.
+    # Before Kaspar had finished asking; `acknowledged` when Kaspar said so.
+    early: bool | UnsetType = UNSET
+    acknowledged: bool | UnsetType = UNSET
+    # A second press right after an answer (or the rest of the answer's gesture), and
+    # the trial it followed (absent while teaching: a pose has no trial).
     extra: bool | UnsetType = UNSET
     trial: int | UnsetType = UNSET
     # While teaching: the bag whose pose was asked again, and joints outside their range.
@@ -154,12 +172,23 @@ class HalRecord(Record, tag="hal", kw_only=True, frozen=True):
 
 
 class PoseRecord(Record, tag="pose", kw_only=True, frozen=True):
-    """A child showed Kaspar where bag `bag` is, in teaching round `round`: joint -> degrees."""
+    """A child showed Kaspar where bag `bag` is, in teaching round `round`: joint -> degrees.
+
+    Recorded by the game since step 2 names its children: `rule` "median" (Kaspar
+    points with the median of every pose shown for the bag; absent in older
+    sessions, where the last round's pose was used), who moved the arm and who
+    pressed, and `check_again` when the pose was far from where the bag was shown
+    before and Kaspar asked for it once more (it counts, the bag is asked again).
+    """
 
     bag: int
     round: int
     pose: dict[str, float]
     at: float
+    rule: str | UnsetType = UNSET
+    mover: str | UnsetType = UNSET
+    presser: str | UnsetType = UNSET
+    check_again: bool | UnsetType = UNSET
 
 
 class StepRecord(Record, tag="step", kw_only=True, frozen=True):
@@ -233,6 +262,9 @@ class TrialRecord(Record, tag="trial", kw_only=True, frozen=True):
     correct: bool | None
     feedback_right: bool | None
     learned: bool
+    # Pressed in the question's last words (before question_end, so the reaction time
+    # is negative) and taken as the answer; absent otherwise.
+    in_question: bool | UnsetType = UNSET
 
     @property
     def green(self) -> bool:

@@ -1,11 +1,19 @@
-"""The researcher's side of the keyfob: gestures to commands, and where each command applies.
+"""The researcher's commands: where they come from, and where each applies.
 
 Pure rules, no I/O: the game (kasparctl.game.machine) asks them and acts.
 Which command applies where comes from the machine's own table
 (kasparctl.game.stages) through `may`: a command applies where the trigger it
 fires would move the machine. Only what the table cannot know is added here:
 the researcher's "next" never skips a step that ends by itself, undo needs an
-answer to take back, and a resume from a fault needs the keyfob back.
+answer to take back, a resume from a fault needs the keyfob back, and in idle
+a stopped session waiting for the researcher's choice is reopened by "next"
+and closed by "stop".
+
+The commands come from the researcher's own device (a key per command), from
+a keypad's extra keys, or, on a robot with one keyfob, from holds on the
+children's keyfob (game.commands: "long green", "long red", "both", held
+researcher.hold_s) that count only when begun while Kaspar asks the children
+nothing (kasparctl.game.presses.ChildPresses.asking_at).
 """
 
 from __future__ import annotations
@@ -13,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from hal.keyfob.gestures import Gesture, GestureKind, GestureNeeds
+from hal.keyfob.gestures import Gesture, GestureKind, GestureNeeds, held_gestures
 from kasparctl.game.records import Confirmation
 from kasparctl.game.stages import RESEARCHER_MOVES_ON, Conditions, may
 from kasparctl.vocabulary import Command
@@ -27,10 +35,10 @@ TRIGGERS: Mapping[Confirmation, str] = {
     Confirmation.RESUME: "resume",
     Confirmation.STOP: "stop",
 }
-# Kaspar confirms these before what they start; the others after what they stop.
-SPOKEN_FIRST = frozenset({Confirmation.START, Confirmation.NEXT_STEP, Confirmation.RESUME})
-
-_MODIFIERS = {"long": GestureKind.LONG, "double": GestureKind.DOUBLE}
+# Kaspar confirms these before what they start; the others after what they stop. A
+# start has no confirmation of its own: the greeting that begins the session is it.
+SPOKEN_FIRST = frozenset({Confirmation.NEXT_STEP, Confirmation.RESUME})
+SILENT = frozenset({Confirmation.START})
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,13 +48,17 @@ class Facts:
     conditions: Conditions  # the transitions' conditions (bags taught, where a resume goes...)
     undo_available: bool  # an answer was recorded since the last undo or step
     hardware_ready: bool  # the keyfob is connected: a resume from a fault can be heard
+    # A stopped session waits in idle for the researcher: reopen it or close it.
+    stopped_waiting: bool = False
 
 
 def confirmation(stage: str, command: Command, facts: Facts) -> Confirmation | None:
     """What `command` does in `stage`, as the confirmation Kaspar says; None: it does not apply."""
     conditions = facts.conditions
     if command is Command.STOP:
-        return Confirmation.STOP if may("stop", stage, conditions) else None
+        if may("stop", stage, conditions):
+            return Confirmation.STOP
+        return Confirmation.CLOSE if stage == "idle" and facts.stopped_waiting else None
     if command is Command.PAUSE:
         if may("pause", stage, conditions):
             return Confirmation.PAUSE
@@ -76,19 +88,13 @@ def gesture_name(gesture: Gesture) -> str:
     return f"{gesture.kind.value} {gesture.button}"
 
 
-def gesture_needs(commands: Mapping[str, Command]) -> GestureNeeds:
-    """Only the gestures some command uses: a red press need not wait for a double
-    unless a double red means something."""
-    needs: dict[str, set[GestureKind]] = {
-        "green": {GestureKind.PRESS},
-        "red": {GestureKind.PRESS},
-    }
-    for gesture in commands:
-        words = gesture.split()
-        if len(words) == 2:
-            needs[words[1]].add(_MODIFIERS[words[0]])
-    return GestureNeeds(
-        green=frozenset(needs["green"]),
-        red=frozenset(needs["red"]),
+def gesture_needs(commands: Mapping[str, Command], hold_s: float) -> GestureNeeds:
+    """The children's keyfob when it also carries the researcher's commands: presses, and
+    holds of `hold_s` for the buttons (and the chord) some command uses; a red press
+    waits for its release only if a long red means something."""
+    return held_gestures(
+        hold_s,
+        green="long green" in commands,
+        red="long red" in commands,
         both="both" in commands,
     )

@@ -83,6 +83,14 @@ class Speech:
         the voice; a bug in picking the line is raised at once)."""
         self._in_background(self.picker.line(key, **values), key)
 
+    def sound_soon(self, key: str) -> None:
+        """Play the recorded clip of `key` (a sound, no words), without waiting for it.
+
+        Only for keys the voice has a clip for ([voice.clips]): the text is empty, so a
+        clip that cannot be played says nothing rather than something else.
+        """
+        self._in_background("", key)
+
     async def finish(self) -> None:
         """Wait for the lines said in the background (the game is over: let them be heard)."""
         while self._background:

@@ -42,7 +42,9 @@ class Conditions:
     plays_names: bool  # the names variant (steps 1-5), not the pilot (step 4 only)
     bags_taught: bool  # every bag's pose is known
     all_done: bool  # every target is learned or given up
-    resume_step: str  # where a resume returns to: the step left for a pause or a fault
+    # Where a resume returns to: the step left for a pause or a fault (or, for a stopped
+    # session reopened, the step it was stopped in).
+    resume_step: str
 
     def holds(self, name: str) -> bool:
         """The value of the condition `name` (a "conditions"/"unless" entry of TRANSITIONS)."""
@@ -87,6 +89,16 @@ def _transitions() -> list[dict[str, Any]]:
     table.append(
         {"trigger": "resume", "source": "fault", "dest": "idle", "conditions": f"{RETURNS_TO}idle"}
     )
+    # A stopped session reopened later (the researcher's "next" in idle): back to its step.
+    for step in STEPS:
+        table.append(
+            {
+                "trigger": "reopen",
+                "source": "idle",
+                "dest": step,
+                "conditions": f"{RETURNS_TO}{step}",
+            }
+        )
     return table
 
 

@@ -14,9 +14,11 @@ struct as JSON, encoded and decoded by kasparctl.game.session.
 from __future__ import annotations
 
 import dataclasses
+import statistics
 
 import msgspec
 import numpy as np
+from msgspec import UNSET, UnsetType
 
 from kasparctl.config import GameSettings
 from kasparctl.game.problem import TargetProgress
@@ -35,7 +37,7 @@ from kasparctl.game.stages import STEPS
 from kasparctl.learning.learner import BoolArray, LearnerParams, LearnerState
 from kasparctl.vocabulary import Command
 
-__all__ = ["STEPS", "GameState", "StateError", "UndoEntry", "restore"]
+__all__ = ["STEPS", "GameState", "StateError", "UndoEntry", "far_from", "median_pose", "restore"]
 
 
 class StateError(ValueError):
@@ -68,12 +70,18 @@ class GameState(msgspec.Struct, eq=False):
     # The previous answered guess on the current target (choice, green), for the
     # paper's perseverative-error and win-shift flags.
     previous: tuple[int, bool] | None = None
-    poses: dict[str, dict[str, float]] = msgspec.field(default_factory=dict)  # target -> joints
+    # target -> joints: where Kaspar points (the median of every pose shown for it).
+    poses: dict[str, dict[str, float]] = msgspec.field(default_factory=dict)
     teach_round: int = 0
     teach_bag: int = 0
-    # What the last child answer changed, so a double red can take it back.
+    # What the last child answer changed, so the researcher's undo can take it back.
     undo: UndoEntry | None = None
     paused: bool = False
+    # Fields added later are UNSET until used, so older snapshots read and save unchanged.
+    # target -> every pose shown for it, in order (pose records with a rule).
+    shown_poses: dict[str, list[dict[str, float]]] | UnsetType = UNSET
+    # The step a stopped session was stopped in: where it carries on if reopened.
+    stopped_from: str | UnsetType = UNSET
 
     @classmethod
     def new(cls, settings: GameSettings, params: LearnerParams, seed: int | None) -> GameState:
@@ -127,13 +135,28 @@ class GameState(msgspec.Struct, eq=False):
             self.paused = record.confirm == Confirmation.PAUSE
 
     def _apply_step(self, step: str) -> None:
+        if step == "stopped" and self.step in STEPS:
+            self.stopped_from = self.step
+        elif step in STEPS and self.step == "stopped":
+            self.stopped_from = UNSET  # reopened
         self.step = step
         if step == "guessing":
             open_target = self.first_open_target()
             self.target = self.target if open_target is None else open_target
 
     def _apply_pose(self, record: PoseRecord, settings: GameSettings) -> None:
-        self.poses[settings.targets[record.bag]] = dict(record.pose)
+        target = settings.targets[record.bag]
+        if record.rule is UNSET:
+            # Recorded before the median rule: the last round's pose was the one used.
+            self.poses[target] = dict(record.pose)
+        else:
+            if self.shown_poses is UNSET:
+                self.shown_poses = {}
+            shown = self.shown_poses.setdefault(target, [])
+            shown.append(dict(record.pose))
+            self.poses[target] = median_pose(shown)
+        if record.check_again is True:
+            return  # the same bag is asked once more
         self.teach_bag = record.bag + 1
         if self.teach_bag >= len(settings.targets):
             self.teach_bag = 0
@@ -180,6 +203,27 @@ class GameState(msgspec.Struct, eq=False):
         self.target = undo.target
         self.previous = undo.previous
         self.undo = None
+
+
+def median_pose(shown: list[dict[str, float]]) -> dict[str, float]:
+    """Where Kaspar points for a bag: each joint's median over every pose shown for it.
+
+    One pose shown wrongly among three is outvoted; each joint stays within the range
+    every shown pose kept (a median lies between shown values).
+    """
+    joints = dict.fromkeys(joint for pose in shown for joint in pose)
+    return {
+        joint: float(statistics.median(pose[joint] for pose in shown if joint in pose))
+        for joint in joints
+    }
+
+
+def far_from(pose: dict[str, float], shown: list[dict[str, float]], limit_deg: float) -> list[str]:
+    """The joints of `pose` further than `limit_deg` from the median of the poses `shown`."""
+    if not shown or limit_deg <= 0:
+        return []
+    middle = median_pose(shown)
+    return [j for j, deg in pose.items() if j in middle and abs(deg - middle[j]) > limit_deg]
 
 
 def restore(

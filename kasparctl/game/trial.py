@@ -19,10 +19,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from msgspec import UNSET
 
 from kasparctl.config import GameSettings, SessionPlan
 from kasparctl.game.phrases import PhraseBook
 from kasparctl.game.records import Button, QuestionRecord, TrialRecord
+from kasparctl.game.scripts import Script
 from kasparctl.game.state import GameState
 from kasparctl.learning.learner import (
     FloatArray,
@@ -32,7 +34,6 @@ from kasparctl.learning.learner import (
     softmax,
     update,
 )
-from kasparctl.vocabulary import CHILD_WORDS
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,6 +50,8 @@ class TrialPlan:
     probabilities: FloatArray  # Eq. 2 over every toy, 0 for those not offered
     entropy: float  # Eq. 3, bits
     band: str | None  # how sure Kaspar says it is; None when the plan keeps it silent
+    # The phrase key of the uncertainty line (the band's, or why it is sure); None if silent.
+    uncertainty_line: str | None
     choice: int
     toy: str
     # The learner's generator after the draw: it moves on only once the trial is recorded.
@@ -63,6 +66,8 @@ class Answer:
     question_end: float
     button: Button
     pressed_at: float
+    # Pressed in the question's last words (before question_end): taken as the answer.
+    in_question: bool = False
 
 
 def plan_trial(
@@ -72,8 +77,13 @@ def plan_trial(
     session_plan: SessionPlan,
     group_size: int,
     book: PhraseBook,
+    script: Script,
 ) -> TrialPlan:
-    """The next question of the session at `state`; `state` itself is not changed."""
+    """The next question of the session at `state`; `state` itself is not changed.
+
+    How sure Kaspar says it is comes from `script`; a child without a first name is
+    called by the book's names.child.
+    """
     target = state.target
     child_index = state.turn % group_size
     candidates = state.candidates
@@ -83,9 +93,10 @@ def plan_trial(
     rng = np.random.Generator(np.random.PCG64())
     rng.bit_generator.state = state.learner.rng.bit_generator.state
     choice = choose(probabilities, rng)
-    band = (
-        book.band_for(entropy, int(candidates.sum())) if session_plan.speak_uncertainty else None
-    )
+    offered = int(candidates.sum())
+    band = script.level(entropy, offered) if session_plan.speak_uncertainty else None
+    progress = state.progress[target]
+    confirmed = progress.streak > 0 and progress.streak_label == choice
     return TrialPlan(
         trial=state.trials + 1,
         problem_trial=state.progress[target].trials + 1,
@@ -94,7 +105,7 @@ def plan_trial(
         child=(
             session_plan.children[child_index]
             if session_plan.children
-            else CHILD_WORDS[child_index]
+            else book.fill("names.child", number=str(child_index + 1))
         ),
         child_index=child_index,
         candidates=tuple(
@@ -103,6 +114,7 @@ def plan_trial(
         probabilities=probabilities,
         entropy=entropy,
         band=band,
+        uncertainty_line=None if band is None else script.line_key(band, offered, confirmed),
         choice=choice,
         toy=settings.toys[choice],
         learner_rng=dict(rng.bit_generator.state),
@@ -180,6 +192,7 @@ def score_answer(
         correct=correct,
         feedback_right=None if correct is None else correct == green,
         learned=progress_after.learned is not None,
+        in_question=True if answer.in_question else UNSET,
     )
 
 

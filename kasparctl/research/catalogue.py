@@ -32,7 +32,6 @@ from kasparctl.game.records import (
 )
 from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
 from kasparctl.research.reader import Warnings, iter_records
-from kasparctl.vocabulary import CHILD_WORDS
 
 # plan.json is a few hundred bytes; one far larger is not a plan, and is not read whole.
 MAX_PLAN_BYTES = 1 << 20
@@ -69,6 +68,9 @@ class PlanFile(msgspec.Struct, kw_only=True, frozen=True):
     variant: str = ""
     seed: int | None = None
     plan: PlanEntry | None = None
+    # The uncertainty script Kaspar spoke; sessions from before scripts spoke "varied".
+    script: str = "varied"
+    script_version: int = 0
 
 
 @dataclass(frozen=True)
@@ -158,6 +160,12 @@ class SessionData:
         return self.meta.variant
 
     @property
+    def script(self) -> tuple[str, int]:
+        """The uncertainty script and its version; ("varied", 0) for a session planned
+        before scripts existed (the five bands, with the words of then)."""
+        return self.meta.script, self.meta.script_version
+
+    @property
     def identity(self) -> dict[str, object]:
         """The columns that name a session and its condition, first in every table of it."""
         return {
@@ -209,11 +217,10 @@ class SessionData:
         return codes[child_index] if 0 <= child_index < len(codes) else None
 
     def child_label(self, child_index: int) -> str:
-        """How Kaspar named the child: a first name from the plan, else "child one"..."""
+        """The child's first name from the plan, else "child 1", "child 2"... (the words
+        Kaspar says for a child without a name are in the trial records)."""
         if 0 <= child_index < len(self.children):
             return self.children[child_index]
-        if 0 <= child_index < len(CHILD_WORDS):
-            return CHILD_WORDS[child_index]
         return f"child {child_index + 1}"
 
     @property

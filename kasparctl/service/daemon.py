@@ -48,23 +48,27 @@ from hal.errors import HalError
 from kasparctl.config import Config, ConfigError, SessionPlan, load_config, servo_backend_given
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.lock import StateDirBusy, StateDirLock
-from kasparctl.game.machine import Game, HardwareFault
+from kasparctl.game.machine import Game, HardwareFault, planned
 from kasparctl.game.phrases import PhraseBook, PhrasePicker, load_phrasebook
-from kasparctl.game.records import FaultSource, Record, SessionEvent, SessionRecord
+from kasparctl.game.records import FaultSource, Record, SessionEvent, SessionRecord, StepRecord
 from kasparctl.game.session import (
     PLAN_FILE,
+    RECORDS_FILE,
     UNDECODABLE,
     Abandoned,
+    CannotResume,
     EventLog,
     Resumable,
     Session,
     StorageFailed,
     abandoned_reason,
-    frozen_learner,
     is_finished,
+    read_records,
+    reopen,
     resume_or_abandon,
     session_dirs,
 )
+from kasparctl.game.stages import ENDS
 from kasparctl.game.state import GameState
 from kasparctl.log import configure_logging
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
@@ -91,7 +95,8 @@ class DaemonOptions:
     config_path: str
     sim: bool = False
     state_dir: str | None = None
-    # With sim: the keyfob's keys from this fifo, which may appear later (FifoKeyfob).
+    # With sim: the keys (the children's and the researcher's) from this fifo, which may
+    # appear later (FifoKeyfob).
     keys: str | None = None
 
 
@@ -240,18 +245,15 @@ class Daemon:
 
     def _build_hardware(self) -> Hardware:
         clock = LoopClock()
-        hardware = build(
+        return build(
             self.config.servos,
             self.config.keyfob,
             self.config.voice,
             clock,
+            researcher=self.config.researcher,
             sim=self.options.sim,
+            sim_keys_fifo=self.options.keys,
         )
-        if self.options.keys is not None:
-            from hal.keyfob.sim import FifoKeyfob
-
-            hardware.keyfob = FifoKeyfob(self.options.keys, clock)
-        return hardware
 
     async def _open_hardware(self) -> None:
         assert self.hw is not None
@@ -267,10 +269,12 @@ class Daemon:
             detail = f"servos not ready: {error}"
             self._pending_faults.append(HardwareFault(FaultSource.SERVO, detail))
         await self.hw.keyfob.start()
+        if self.hw.researcher is not None:
+            await self.hw.researcher.start()
 
     async def _one_session(self) -> None:
         assert self.hw is not None
-        resumed = None
+        resumed = stopped = None
         self._resumable = None
         self._read_again = False
         unread = True
@@ -278,6 +282,7 @@ class Daemon:
             self._write_carried()
             try:
                 resumed = self._resume()
+                stopped = None if resumed is not None else self._stopped_waiting()
                 unread = False
             except StorageFailed as error:
                 detail = f"cannot read the sessions in {self.state_dir}: {error}"
@@ -296,11 +301,12 @@ class Daemon:
         assert self._book is not None  # read in _run
         picker = PhrasePicker(self._book, np.random.default_rng())
         game = Game(
-            self._config_of(resumed),
+            self._config_of(resumed or stopped),
             self.hw,
             picker,
             self._open_session,
             resumed,
+            stopped=stopped,
             event_log=self.events,
             startup_faults=faults,
             known_problems=self._carried_problems,
@@ -336,15 +342,22 @@ class Daemon:
         game.flush_unwritten()
         # What the disk still refuses is written by the next game (or before the next read).
         self._unwritten = game.unwritten
-        # Not over with the game: the keyfob still away (its report was this game's),
-        # the voice or the disk until a line is heard or a record written.
+        # Not over with the game: the keyfob or the researcher's device still away (their
+        # reports were this game's), the voice or the disk until a line is heard or a
+        # record written.
+        carried = (
+            FaultSource.KEYFOB,
+            FaultSource.RESEARCHER,
+            FaultSource.VOICE,
+            FaultSource.STORAGE,
+        )
         self._carried_problems = {
-            kind: detail
-            for kind, detail in game.problems.items()
-            if kind in (FaultSource.KEYFOB, FaultSource.VOICE, FaultSource.STORAGE)
+            kind: detail for kind, detail in game.problems.items() if kind in carried
         }
         if game.session is not None:
             game.session.close()
+        if game.stopped_waiting is not None:
+            game.stopped_waiting[0].close()  # neither reopened nor closed in this game
         if self._reload:
             self._apply_reload()
 
@@ -396,7 +409,8 @@ class Daemon:
     # -- sessions --------------------------------------------------------------------
 
     def _config_of(self, resumed: tuple[Session, SessionPlan, GameState] | None) -> Config:
-        """The configuration a game plays: a resumed session keeps the learner it began with."""
+        """The configuration a game plays: a resumed (or reopened) session keeps the learner
+        it began with."""
         return self._resumable.config(self.config) if resumed and self._resumable else self.config
 
     def _resume(self) -> tuple[Session, SessionPlan, GameState] | None:
@@ -437,37 +451,63 @@ class Daemon:
         seed = (
             self.config.game.seed if self.config.game.seed is not None else secrets.randbelow(2**31)
         )
-        params = self.config.profile(plan.profile)
         session = Session.create(
-            self.state_dir,
-            {
-                "group": plan.group,
-                "condition": plan.condition,
-                "variant": self.config.game.variant,
-                "seed": seed,
-                "plan": msgspec.to_builtins(plan),
-                "learner": frozen_learner(plan.profile, params),
-            },
-            robot=self.config.robot(),
+            self.state_dir, planned(self.config, plan, seed), robot=self.config.robot()
         )
-        state = GameState.new(self.config.game, params, seed)
+        state = GameState.new(self.config.game, self.config.profile(plan.profile), seed)
         log.info("session opened", session=session.id, group=plan.group, condition=plan.condition)
         return session, plan, state
 
     def _next_plan(self) -> SessionPlan:
-        """The first planned group without a finished session; then the last one again.
+        """The first planned session (group and number) not yet ended; then the last again.
 
-        An abandoned session did not finish: its group is played again.
+        A session ends finished, or stopped (the researcher then reopens it with "next",
+        or closes it with "stop": a stopped session waits for that choice, see
+        _stopped_waiting). Sessions recorded before plans were numbered are number 1.
+        An abandoned session did not end: it is played again.
         """
         plans = self.config.sessions
         if not plans:
             return SessionPlan(group="unplanned")
-        done = set()
+        done: set[tuple[str, int]] = set()
         for directory in session_dirs(self.state_dir):
             if is_finished(directory) and abandoned_reason(directory) is None:
-                with contextlib.suppress(OSError, *UNDECODABLE, KeyError, TypeError):
-                    done.add(msgspec.json.decode((directory / PLAN_FILE).read_bytes())["group"])
-        return next((plan for plan in plans if plan.group not in done), plans[-1])
+                with contextlib.suppress(OSError, *UNDECODABLE, KeyError, TypeError, ValueError):
+                    meta = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
+                    done.add((meta["group"], int(meta.get("number", 1))))
+        return next((p for p in plans if (p.group, p.number) not in done), plans[-1])
+
+    def _stopped_waiting(self) -> tuple[Session, SessionPlan, GameState] | None:
+        """The latest session, if the researcher stopped it and has not closed it yet.
+
+        StorageFailed when it cannot be read; a stopped session that cannot be reopened
+        (its records damaged since, its learner gone) stays closed, with a warning.
+        """
+        directories = list(session_dirs(self.state_dir))
+        if not directories:
+            return None
+        latest = directories[-1]
+        if not is_finished(latest) or abandoned_reason(latest) is not None:
+            return None
+        records = read_records(latest / RECORDS_FILE).records
+        ends = [r.to for r in records if isinstance(r, StepRecord) and r.to in ENDS]
+        closed = any(
+            isinstance(r, SessionRecord) and r.event is SessionEvent.CLOSED for r in records
+        )
+        if not ends or ends[-1] != "stopped" or closed:
+            return None
+        try:
+            resumable = reopen(latest, self.config.game, self.config.profile)
+        except CannotResume as error:
+            log.warning(
+                "a stopped session cannot be reopened; it stays closed",
+                session=latest.name,
+                reason=error.reason,
+            )
+            return None
+        self._resumable = resumable
+        log.info("a stopped session waits: next reopens it, stop closes it", session=latest.name)
+        return resumable.session, resumable.plan, resumable.state
 
     # -- signals, reload, watchdog ------------------------------------------------------
 
@@ -554,6 +594,8 @@ class Daemon:
         except (HalError, TimeoutError) as error:
             log.error("could not bring Kaspar to rest", error=str(error) or "timed out")
         await hw.keyfob.close()
+        if hw.researcher is not None:
+            await hw.researcher.close()
         await hw.voice.close()
         await hw.servos.close()
         log.info("stopped", reason=self._stop_reason)

@@ -31,6 +31,7 @@ PROBLEM_WORDS = {
     FaultSource.VOICE: "voice failing",
     FaultSource.SOFTWARE: "software error",
     FaultSource.STORAGE: "CANNOT SAVE the records",
+    FaultSource.RESEARCHER: "researcher's device not connected",
 }
 # What the researcher does about it: nothing more is played until it saves again.
 STORAGE_ADVICE = (

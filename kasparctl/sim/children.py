@@ -1,29 +1,38 @@
 """A simulated group of children and their researcher, pressing the simulated keyfob.
 
-They follow what the game announces (a question, a request to move the arm,
-a step waiting for the researcher) and answer like the simulator's teachers
+They follow what the game announces (a question, a request to show a bag, a
+step waiting for the researcher) and answer like the simulator's teachers
 (kasparctl.sim.teacher): they know the right toys, and may press the wrong button
 or not answer at all; a child who did not answer answers after a prompt. They
-act only through the simulated hardware, as real children would, so the game
-under test is the game on the robot.
+may press messily (Messiness: holds, double taps, both buttons, early presses),
+and every press they make is kept (`presses`) so a run can check that each
+answer was taken and that no press of theirs became a researcher's command.
+The researcher gives commands through `command` (their own device, or holds on
+the children's keyfob). They act only through the simulated hardware, as real
+children would, so the game under test is the game on the robot.
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 
-from hal.keyfob.sim import SimKeyfob
+from hal.keyfob.sim import CHORD_LAG, PRESS_GAP, PRESS_HOLD, SimKeyfob
 from hal.servos.settings import ServoSettings
 from kasparctl.game.events import GameEvent
 from kasparctl.game.records import FaultSource
-from kasparctl.sim.teacher import Teacher
+from kasparctl.sim.teacher import Messiness, Teacher
 
 Say = Callable[[str], None]
+# The researcher's command ("next", "pause", "undo", "stop"), given however they give them.
+Command = Callable[[str], Awaitable[None]]
 MAX_RESUMES = 3
+# Where a child shows a bag is where the bag is, give or take this much (degrees).
+SHOW_NOISE_DEG = 3.0
 
 
 class Hands(Protocol):
@@ -44,6 +53,23 @@ class Hands(Protocol):
         ...
 
 
+@dataclass(frozen=True, slots=True)
+class ChildPress:
+    """One press a child made: for which question (trial) or bag, what they meant, when.
+
+    `downs` are the times its keys went down (a double and a squeeze have two) and
+    `up` when the last one came up; `early` when made while Kaspar was still asking.
+    """
+
+    trial: int | None
+    bag: int | None
+    button: str
+    action: str
+    downs: tuple[float, ...]
+    up: float
+    early: bool
+
+
 class SimulatedGroup:
     """A listener for Game.listeners that plays the children and the researcher."""
 
@@ -56,24 +82,38 @@ class SimulatedGroup:
         rng: np.random.Generator,
         *,
         pointing_group: str,
+        command: Command,
+        messiness: Messiness | None = None,
+        room: np.random.Generator | None = None,
         think_s: tuple[float, float] = (0.8, 2.5),
         researcher_s: float = 1.5,
         narrate: Say | None = None,
         patience: int = MAX_RESUMES,
     ) -> None:
-        """Children who press `keyfob` and move `servos`, believing `answers` (a toy per target)."""
+        """Children who press `keyfob` and move `servos`, believing `answers` (a toy per
+        target); their researcher gives commands with `command`. Where the bags are is
+        drawn from `room` (the same after a resume, when the children's `rng` is new)."""
         self.keyfob = keyfob
         self.servos = servos
         self.teacher = teacher
         self.answers = list(answers)
         self.rng = rng
         self.pointing_group = pointing_group
+        self.command = command
+        self.messiness = messiness or Messiness()
         self.think_s = think_s
         self.researcher_s = researcher_s
         self.narrate = narrate or (lambda text: None)
-        self._tasks: set[asyncio.Task[None]] = set()
-        self._silent_question: tuple[int, int] | None = None
         self.patience = patience
+        self.presses: list[ChildPress] = []
+        # One keyfob for the group: a child waits for it, and then sees whether the
+        # question was answered meanwhile (by the child who had it).
+        self._keyfob_free = asyncio.Lock()
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._silent_question: tuple[int, int, int] | None = None
+        self._answered: set[int] = set()
+        self._room = room if room is not None else rng
+        self._bag_poses: dict[int, dict[str, float]] = {}
         self._faults = 0
         self._state = "idle"
         self._resuming = False
@@ -84,12 +124,16 @@ class SimulatedGroup:
             self._state = str(info["state"])
         if event is GameEvent.WAITING_FOR_RESEARCHER:
             self._spawn(self._researcher_next())
+        elif event is GameEvent.ASKING:
+            self._spawn(self._eager(info))
         elif event is GameEvent.QUESTION:
-            self._spawn(self._answer(int(info["target"]), int(info["choice"])))
+            self._spawn(self._answer(int(info["trial"]), int(info["target"]), int(info["choice"])))
+        elif event is GameEvent.ANSWERED:
+            self._answered.add(int(info["trial"]))
         elif event is GameEvent.PROMPT and self._silent_question is not None:
-            target, choice = self._silent_question
+            trial, target, choice = self._silent_question
             self._silent_question = None
-            self._spawn(self._answer(target, choice, honest_now=True))
+            self._spawn(self._answer(trial, target, choice, honest_now=True))
         elif event is GameEvent.TEACH:
             self._spawn(self._teach(int(info["bag"])))
         elif _calls_researcher(event, info) and not self._resuming:
@@ -112,53 +156,103 @@ class SimulatedGroup:
         low, high = self.think_s
         await asyncio.sleep(float(self.rng.uniform(low, high)))
 
-    async def _press(self, action: str, who: str) -> None:
+    async def _press(
+        self, action: str, who: str, *, trial: int | None = None, bag: int | None = None,
+        button: str = "", early: bool = False,
+    ) -> None:  # fmt: skip
         self.narrate(f"{who} presses {action.upper()}")
-        await self.keyfob.perform(action)
+        start = await self.keyfob.perform(action)
+        if who == "the researcher":
+            return
+        self.presses.append(
+            ChildPress(
+                trial, bag, button, action, _downs(action, start),
+                asyncio.get_running_loop().time(), early,
+            )
+        )
 
     async def _researcher_next(self) -> None:
         await asyncio.sleep(self.researcher_s)
-        await self._press("long green", "the researcher")
+        self.narrate("the researcher gives NEXT")
+        await self.command("next")
 
     async def _researcher_resumes(self) -> None:
-        # The researcher checks the robot, then resumes with the usual gesture (again,
-        # if the robot refused); after `patience` tries they end the session safely.
+        # The researcher checks the robot, then resumes (again, if the robot refused);
+        # after `patience` tries they end the session safely.
         try:
             await asyncio.sleep(self.researcher_s * 2)
             if self._state != "fault":
                 return  # resumed already, or over
             self._faults += 1
-            if self._faults > self.patience:
-                await self._press("both", "the researcher")
-            else:
-                await self._press("long red", "the researcher")
+            command = "stop" if self._faults > self.patience else "pause"
+            self.narrate(f"the researcher gives {command.upper()}")
+            await self.command(command)
         finally:
             self._resuming = False
 
-    async def _answer(self, target: int, choice: int, honest_now: bool = False) -> None:
+    def _reply(self, target: int, choice: int, honest_now: bool) -> bool | None:
         correct = choice == self.answers[target]
-        reply = correct if honest_now else self.teacher.answer(correct, self.rng)
+        return correct if honest_now else self.teacher.answer(correct, self.rng)
+
+    async def _eager(self, info: dict[str, Any]) -> None:
+        """A child who presses while Kaspar is still asking (Messiness.p_early)."""
+        if "trial" not in info:
+            return  # in step 2 the presser waits for the arm
+        delay = self.messiness.early(self.rng)
+        if delay is None:
+            return
+        trial, target, choice = int(info["trial"]), int(info["target"]), int(info["choice"])
+        await asyncio.sleep(delay)
+        meant = "green" if choice == self.answers[target] else "red"
+        action = self.messiness.action(meant, self.rng)
+        async with self._keyfob_free:
+            if trial not in self._answered:
+                await self._press(action, "an eager child", trial=trial, button=meant, early=True)
+
+    async def _answer(self, trial: int, target: int, choice: int, honest_now: bool = False) -> None:
+        reply = self._reply(target, choice, honest_now)
         if reply is None:
             self.narrate("the children say nothing")
-            self._silent_question = (target, choice)
+            self._silent_question = (trial, target, choice)
             return
         await self._think()
-        await self._press("green" if reply else "red", "a child")
+        button = "green" if reply else "red"
+        action = self.messiness.action(button, self.rng)
+        async with self._keyfob_free:
+            if trial not in self._answered:  # an eager press may have answered it
+                await self._press(action, "a child", trial=trial, button=button)
 
     async def _teach(self, bag: int) -> None:
         await self._think()
-        # Each bag somewhere else in the room, within what the arm can safely reach.
+        # Each bag in its own place in the room, within what the arm can safely reach;
+        # each child shows it a little differently.
         ranges = {j.name: j.range_deg for j in self.servos.settings.joints}
-        pose = {}
-        for joint in self.servos.groups[self.pointing_group]:
+        joints = self.servos.groups[self.pointing_group]
+        while len(self._bag_poses) <= bag:  # in bag order: the same room after a resume
+            pose = {}
+            for joint in joints:
+                low, high = ranges[joint]
+                margin = (high - low) * 0.1
+                pose[joint] = float(self._room.uniform(low + margin, high - margin))
+            self._bag_poses[len(self._bag_poses)] = pose
+        for joint, degrees in self._bag_poses[bag].items():
             low, high = ranges[joint]
-            margin = (high - low) * 0.1
-            pose[joint] = float(self.rng.uniform(low + margin, high - margin))
-        for joint, degrees in pose.items():
-            self.servos.push(joint, degrees)
+            noise = float(self.rng.uniform(-SHOW_NOISE_DEG, SHOW_NOISE_DEG))
+            self.servos.push(joint, min(high, max(low, degrees + noise)))
         self.narrate(f"a child moves Kaspar's arm towards bag {bag + 1}")
         await asyncio.sleep(0.5)
-        await self._press("green", "another child")
+        action = self.messiness.action("green", self.rng)
+        await self._press(action, "another child", bag=bag, button="green")
+
+
+def _downs(action: str, start: float) -> tuple[float, ...]:
+    """When the keys of a keyfob action went down, performed from `start`."""
+    words = action.split()
+    if words[0] == "double":
+        return (start, start + PRESS_HOLD + PRESS_GAP)
+    if words[0] == "chord":
+        return (start, start + CHORD_LAG)
+    return (start,)
 
 
 def _calls_researcher(event: GameEvent, info: dict[str, Any]) -> bool:

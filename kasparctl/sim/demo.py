@@ -2,7 +2,12 @@
 
 Used by `kasparctl demo` and by the end-to-end tests: the game, the sessions
 and the servo safety layer are the robot's own; only the servo drivers, the
-keyfob and the voice are simulated twins.
+keyfob (and the researcher's device) and the voice are simulated twins.
+
+A demo's result also measures the interaction: how long from a child's answer
+to the end of Kaspar's next question (median), Kaspar's speech per trial, the
+researcher's commands a child's press started (there must be none), and the
+children's answers the game did not take (none).
 """
 
 from __future__ import annotations
@@ -10,8 +15,10 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import errno
+import itertools
+import statistics
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -22,29 +29,38 @@ import numpy as np
 
 from hal import Hardware
 from hal.clock import LoopClock
-from hal.keyfob.sim import SimKeyfob, TerminalKeyfob
+from hal.keyfob.sim import COMMAND_GESTURES, SimKeyfob, TerminalKeyfob
 from hal.servos.api import ServoApi
 from hal.servos.sim import SimServos
 from hal.voice.api import VoiceOutput
 from hal.voice.sim import SimVoice
 from kasparctl.config import Config, SessionPlan, parse_config
 from kasparctl.game.events import GameEvent, Listener
-from kasparctl.game.machine import Game
+from kasparctl.game.machine import Game, planned
 from kasparctl.game.phrases import PhrasePicker, load_phrasebook
-from kasparctl.game.records import FaultSource
+from kasparctl.game.records import (
+    AnyRecord,
+    CommandRecord,
+    FaultSource,
+    PoseRecord,
+    TrialRecord,
+)
 from kasparctl.game.session import (
     Abandoned,
     EventLog,
     Session,
-    frozen_learner,
     resume_or_abandon,
 )
 from kasparctl.game.stages import ENDS
 from kasparctl.game.state import GameState
 from kasparctl.sim import simtime
-from kasparctl.sim.children import MAX_RESUMES, Hands, SimulatedGroup
+from kasparctl.sim.children import MAX_RESUMES, ChildPress, Hands, SimulatedGroup
 from kasparctl.sim.simulate import draw_answer_key
-from kasparctl.sim.teacher import DEFAULT_THINK_S, Teacher
+from kasparctl.sim.teacher import DEFAULT_THINK_S, Messiness, Teacher
+
+# Kaspar's speech per trial is counted at this rate (words a minute), as the speech
+# budget was measured before the interaction was reworked.
+BUDGET_WPM = 150
 
 
 def with_variant(config: Config, variant: str) -> Config:
@@ -57,11 +73,18 @@ def with_variant(config: Config, variant: str) -> Config:
             "shelf": {"right_shoulder_pitch": -70.0, "right_shoulder_roll": 40.0},
             "basket": {"right_shoulder_pitch": -30.0, "right_shoulder_roll": 70.0},
         }
+        phrases = {"box": "in the box", "shelf": "on the shelf", "basket": "in the basket"}
         game = msgspec.structs.replace(
-            config.game, variant="pilot", locations=tuple(poses), poses=poses
+            config.game,
+            variant="pilot",
+            locations=tuple(poses),
+            poses=poses,
+            location_phrases=phrases,
         )
     else:
-        game = msgspec.structs.replace(config.game, variant="names", locations=(), poses={})
+        game = msgspec.structs.replace(
+            config.game, variant="names", locations=(), poses={}, location_phrases={}
+        )
     return msgspec.structs.replace(config, game=game)
 
 
@@ -109,6 +132,7 @@ class DemoOptions:
     teacher: Teacher = field(default_factory=Teacher)
     # How long the simulated children think before pressing: uniform in this range (s).
     think_s: tuple[float, float] = DEFAULT_THINK_S
+    messiness: Messiness = field(default_factory=Messiness)
     interactive: bool = False
     # Printed lines: the dialogue and what the children and the robot do (the
     # stdout of the moment the demo runs, not of the moment this was imported).
@@ -126,6 +150,14 @@ class DemoResult:
     resumed: bool
     final_state: str
     state_dir: str
+    # Median seconds from a child's answer to the end of Kaspar's next question.
+    answer_to_next_question_s: float | None = None
+    # Seconds of Kaspar's speech per trial in step 4 (words at BUDGET_WPM).
+    speech_s_per_trial: float | None = None
+    # Researcher commands (applied or not) that a simulated child's press started.
+    accidental_commands: int = 0
+    # Answers the simulated children gave that the game did not take as they meant.
+    answers_lost: int = 0
 
     def summary(self) -> dict[str, Any]:
         """The result as plain data (the demo's --json line)."""
@@ -156,6 +188,13 @@ class DemoRig(Generic[ServosT]):
     abandoned: list[Abandoned] = field(default_factory=list)
     # Why the records could not be saved, once they could not: the demo ends there.
     storage_failed: str | None = None
+    # The researcher's own simulated device, when their commands come from one.
+    researcher: SimKeyfob | None = None
+
+    async def command(self, name: str) -> None:
+        """The researcher's command `name` (next, pause, undo, stop), as they give it:
+        a key of their device, or the hold on the children's keyfob that means it."""
+        await researcher_command(self.game.config, self.keyfob, self.researcher, name)
 
     async def run(self) -> DemoResult:
         """Start the simulated hardware, play (or resume) the session, close everything.
@@ -179,11 +218,15 @@ class DemoRig(Generic[ServosT]):
         reader_gone = asyncio.Event()
         if self.transcript is not None:
             self.transcript.on_gone = reader_gone.set
+        if self.researcher is not None:
+            await self.researcher.start()
         try:
             final = await _play_until(self.game, storage, reader_gone)
         finally:
             if self.children is not None:
                 await self.children.close()
+            if self.researcher is not None:
+                await self.researcher.close()
             await self.keyfob.close()
             await self.voice.close()
             await self.servos.close()
@@ -203,6 +246,12 @@ class DemoRig(Generic[ServosT]):
                 f"what was written is kept in {self.state_dir}, and the session resumes from "
                 "there once the disk takes records again"
             )
+        session.close()
+        records = session.records()
+        if self.game.event_log is not None:
+            records += self.game.event_log.records().records
+        trials = [r for r in records if isinstance(r, TrialRecord)]
+        presses = self.children.presses if self.children is not None else []
         return DemoResult(
             session=session.id,
             finished=final == "finished",
@@ -211,6 +260,10 @@ class DemoRig(Generic[ServosT]):
             resumed=self.resumed,
             final_state=final,
             state_dir=str(self.state_dir),
+            answer_to_next_question_s=answer_to_next_question(trials),
+            speech_s_per_trial=speech_per_trial(self.voice, trials),
+            accidental_commands=accidental_commands(records, presses),
+            answers_lost=len(lost_answers(records, presses)),
         )
 
 
@@ -224,7 +277,8 @@ def build(
     """
     clock = LoopClock()
     servos = SimServos(config.servos, clock)
-    return assemble(config, options, servos, SimVoice(options.out, clock), children_answers)
+    voice = SimVoice(options.out, clock, clips=config.voice.clips)
+    return assemble(config, options, servos, voice, children_answers)
 
 
 def assemble(
@@ -243,7 +297,19 @@ def assemble(
     def narrate(text: str) -> None:
         out.write(f"[{clock.now():10.3f}]   ({text})\n")
 
-    keyfob = TerminalKeyfob(clock) if options.interactive else SimKeyfob(clock)
+    researcher = None
+    if config.researcher.source == "device":
+        researcher = SimKeyfob(clock, commands=sorted(set(config.researcher.keys.values())))
+    # A keypad's command keys are keys of the children's keypad.
+    keypad = (
+        sorted(set(config.keyfob.commands.values()))
+        if config.researcher.source == "keypad"
+        else []
+    )
+    if options.interactive:
+        keyfob: SimKeyfob = TerminalKeyfob(clock, researcher=researcher, commands=keypad)
+    else:
+        keyfob = SimKeyfob(clock, commands=keypad)
     book = load_phrasebook(config.language, config.phrases_dir)
     picker = PhrasePicker(book, np.random.default_rng([options.seed, 2]))
     plan = config.sessions[0] if config.sessions else SessionPlan(group="demo")
@@ -259,26 +325,16 @@ def assemble(
     answers = _answers(config, plan, options.seed)
 
     def open_session() -> tuple[Session, SessionPlan, GameState]:
-        params = config.profile(plan.profile)
-        planned = msgspec.structs.replace(
+        with_key = msgspec.structs.replace(
             plan, answer_key=tuple(config.game.toys[a] for a in answers)
         )
         session = Session.create(
-            options.state_dir,
-            {
-                "group": planned.group,
-                "condition": planned.condition,
-                "variant": config.game.variant,
-                "seed": options.seed,
-                "plan": msgspec.to_builtins(planned),
-                "learner": frozen_learner(planned.profile, params),
-            },
-            robot=config.robot(),
+            options.state_dir, planned(config, with_key, options.seed), robot=config.robot()
         )
-        state = GameState.new(config.game, params, options.seed)
-        return session, planned, state
+        state = GameState.new(config.game, config.profile(with_key.profile), options.seed)
+        return session, with_key, state
 
-    hardware = Hardware(servos, keyfob, voice)
+    hardware = Hardware(servos, keyfob, voice, researcher)
     # Before the session opens and after it ends, what happens goes where the service puts it.
     events = EventLog(options.state_dir)
     game = Game(config, hardware, picker, open_session, resumed, event_log=events)
@@ -294,6 +350,10 @@ def assemble(
             np.random.default_rng([options.seed, 1, progress]),
             pointing_group=config.game.pointing_group,
             think_s=options.think_s,
+            command=lambda name: researcher_command(config, keyfob, researcher, name),
+            messiness=options.messiness,
+            # The bags stay where they were put, whatever was interrupted.
+            room=np.random.default_rng([options.seed, 4]),
             narrate=narrate,
             patience=patience,
         )
@@ -302,8 +362,89 @@ def assemble(
     transcript = out if isinstance(out, Transcript) else None
     return DemoRig(
         game, servos, keyfob, voice, children, resumed is not None, options.state_dir,
-        transcript=transcript, abandoned=outcome.abandoned,
+        transcript=transcript, abandoned=outcome.abandoned, researcher=researcher,
     )
+
+
+async def researcher_command(
+    config: Config, keyfob: SimKeyfob, device: SimKeyfob | None, name: str
+) -> None:
+    """Give the researcher's command `name` on `device`, or as the configured hold on the
+    children's `keyfob` (one keyfob, or the device away)."""
+    if device is not None and device.connected:
+        await device.perform(f"command {name}")
+        return
+    if config.researcher.source == "keypad":
+        await keyfob.perform(f"command {name}")  # a command key of the children's keypad
+        return
+    gestures = {command: gesture for gesture, command in config.game.commands.items()}
+    gesture = gestures.get(name, COMMAND_GESTURES[name])
+    # Held a little past the researcher's hold, as the keyfob's "long" actions are.
+    hold = config.researcher.hold_s + 0.3
+    if gesture == "both":
+        await keyfob.perform(f"chord green {hold:.3f}")
+    elif gesture.startswith("long "):
+        await keyfob.perform(f"hold {gesture.split()[1]} {hold:.3f}")
+    else:
+        await keyfob.perform(gesture)
+
+
+def answer_to_next_question(trials: Sequence[TrialRecord]) -> float | None:
+    """Median seconds from each answer to the end of the next question."""
+    gaps = [b.question_end - a.feedback_at for a, b in itertools.pairwise(trials)]
+    return round(statistics.median(gaps), 3) if gaps else None
+
+
+def speech_per_trial(voice: VoiceOutput, trials: Sequence[TrialRecord]) -> float | None:
+    """Seconds of Kaspar's speech per trial in step 4, its words at BUDGET_WPM.
+
+    From 30 s before the first question's end (its intro and first question) to the
+    last answer: what the speech budget has always counted.
+    """
+    if not trials or not isinstance(voice, SimVoice):
+        return None
+    start, end = trials[0].question_end - 30.0, trials[-1].feedback_at
+    words = sum(len(line.text.split()) for line in voice.lines if start <= line.started <= end)
+    return round(words * 60.0 / BUDGET_WPM / len(trials), 3)
+
+
+def accidental_commands(records: Sequence[AnyRecord], presses: Sequence[ChildPress]) -> int:
+    """Researcher commands begun by a child's press: a command whose gesture began while a
+    simulated child's keys were down (the children never touch the researcher's device)."""
+    commands = [r for r in records if isinstance(r, CommandRecord)]
+    return sum(any(p.downs[0] <= c.at <= p.up for p in presses) for c in commands)
+
+
+def lost_answers(records: Sequence[AnyRecord], presses: Sequence[ChildPress]) -> list[str]:
+    """The children's answers the game did not take as they meant them.
+
+    A trial's answer must be the children's first press for it made after the question
+    ended, or an eager one the game took in the question's last words (the record says
+    so; a double tap whose first tap came too early answers with its second), with the
+    button meant. In step 2 every press that showed a bag must be the time of a pose
+    record (Kaspar read the arm when it came, whatever the press became).
+    """
+    trials = [r for r in records if isinstance(r, TrialRecord)]
+    shown = {r.at for r in records if isinstance(r, PoseRecord)}
+    lost = [
+        f"bag {p.bag + 1} at {p.downs[0]:.3f}"
+        for p in presses
+        if p.bag is not None and not shown.intersection(p.downs)
+    ]
+    by_trial: dict[int, list[ChildPress]] = {}
+    for press in presses:
+        if press.trial is not None:
+            by_trial.setdefault(press.trial, []).append(press)
+    latest: dict[int, TrialRecord] = {t.trial: t for t in trials}  # an undone trial is asked again
+    for number, trial in latest.items():
+        mine = by_trial.get(number, [])
+        taken = [p for p in mine if trial.feedback_at in p.downs]
+        after = [p for p in mine if p.downs[0] >= trial.question_end]
+        meant = bool(taken) and taken[0].button == trial.feedback
+        skipped = any(p.downs[0] < trial.feedback_at for p in after)
+        if not meant or skipped:
+            lost.append(f"trial {number}")
+    return lost
 
 
 async def play(config: Config, options: DemoOptions) -> DemoResult:
@@ -339,6 +480,8 @@ def _narrator(narrate: Callable[[str], None]) -> Listener:
     def listener(event: GameEvent, info: dict[str, Any]) -> None:
         if event is GameEvent.POINT:
             narrate(f"Kaspar points at {info['target']}")
+        elif event is GameEvent.LISTENING:
+            narrate("Kaspar listens")
         elif event is GameEvent.STATE and info["state"] in ("paused", "fault", *ENDS):
             narrate(f"the game is {info['state']}")
         elif event is GameEvent.SESSION:

@@ -219,6 +219,14 @@ def _on_hal(view: SessionView, record: HalRecord) -> SessionView:
     if record.event is HalEvent.KEYFOB_LOST:
         # The fault record that follows says it stopped the game; this says the keyfob is gone.
         return replace(view, keyfob_lost=True)
+    if record.event is HalEvent.RESEARCHER_BACK:
+        return view
+    if record.event is HalEvent.RESEARCHER_LOST:
+        # Nothing stops for it: the researcher's holds on the children's keyfob meanwhile.
+        reason = record.reason if isinstance(record.reason, str) else "lost"
+        return replace(
+            view, faults=(*view.faults, FaultSeen(record.time, "researcher", reason))
+        )
     status = record.status if isinstance(record.status, str) else "failed"
     said = record.text if isinstance(record.text, str) else ""
     detail = f"line not heard ({status}): {said}" if said else f"line not heard ({status})"
