@@ -72,5 +72,8 @@ def test_messy_children_give_no_command_and_the_summary_says_so(capsys, tmp_path
 
 
 def test_a_messy_probability_outside_zero_to_one_is_refused(capsys) -> None:
-    assert main(["demo", "--fast", "--p-double", "1.5"]) == 1
-    assert "expected a probability in [0, 1], found 1.5" in capsys.readouterr().err
+    # A usage error, as every bad argument is: exit 2 with argparse's message.
+    with pytest.raises(SystemExit) as exited:
+        main(["demo", "--fast", "--p-double", "1.5"])
+    assert exited.value.code == 2
+    assert "argument --p-double: expected a number from 0 to 1, found 1.5" in capsys.readouterr().err
