@@ -149,7 +149,7 @@ def test_a_missing_servo_adapter_is_named_once_and_no_joint_is_said_to_the_child
         status = service.notify.wait_for_status(lambda s: s.startswith("fault") and adapter in s)
         assert "servo fault" in status
         line = service.stderr.wait_for(lambda text: "Kaspar: " in text)
-        assert spoken(line, PHRASES["fault"]["problem"]), line
+        assert spoken(line, PHRASES["fault"]["servo"]), line
         assert service.stop() == 0
         said = [text for text in service.stderr.text().splitlines() if "Kaspar: " in text]
     joints = ("head", "smile", "shoulder", "elbow", "yaw", "pitch", "joint")

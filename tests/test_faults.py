@@ -231,8 +231,14 @@ def test_fault_in_every_stage(
         )
         seen["status"] = next(s for s in rig.notifier.statuses[statuses_before:] if words in s)
         if fault != "voice":
-            # No joint is named to the children: a servo is "a problem", the disk "storage".
-            key = {"keyfob": "keyfob_lost", "disk_full": "storage", "unwritable": "storage"}.get(fault, "problem")
+            # No joint is named to the children: a servo is "part of my body", the disk "storage".
+            key = {
+                "keyfob": "keyfob_lost",
+                "disk_full": "storage",
+                "unwritable": "storage",
+                "servo": "servo",
+                "bus_lost": "servo",
+            }.get(fault, "problem")
             await rig.until(f"Kaspar saying fault.{key}", lambda: phrase_said(rig, "fault", key, said_before))
         if storage:
             # While the disk refuses, the journal holds what could not be written, whole.
