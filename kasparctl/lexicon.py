@@ -134,9 +134,8 @@ def words(entry: ToyEntry, language: str, source: str, key: str) -> ToyWords:
     if entry.gender is not None:
         if genders is not None and entry.gender not in genders:
             allowed = ", ".join(f"{g} ({_GENDER_WORDS[g]})" for g in genders) or "none"
-            raise fail(
-                f"{key}.gender", f"expected one of {allowed} in {language!r}, found {entry.gender!r}"
-            )
+            found = repr(entry.gender)
+            raise fail(f"{key}.gender", f"expected one of {allowed} in {language!r}, found {found}")
     elif genders and entry.the is None:
         raise fail(
             f"{key}.gender",
@@ -175,8 +174,7 @@ def shipped_words(language: str) -> dict[str, ToyWords]:
     """Every toy of the shipped lexicon of `language`, with its words."""
     source = shipped_source(language)
     return {
-        toy: words(entry, language, source, toy)
-        for toy, entry in shipped_entries(language).items()
+        toy: words(entry, language, source, toy) for toy, entry in shipped_entries(language).items()
     }
 
 

@@ -232,7 +232,10 @@ def test_a_bad_toy_entry_is_named(entry: str, expected: str) -> None:
 def test_an_unknown_entry_field_is_named() -> None:
     with pytest.raises(ConfigError) as error:
         parse_config(GERMAN_BALL + '[toy_names.de.ball]\nname = "Ball"\nplural = "Bälle"\n', "k")
-    assert str(error.value) == "k: toy_names.de.ball.plural: unknown key; expected one of: name, gender, the"
+    assert (
+        str(error.value)
+        == "k: toy_names.de.ball.plural: unknown key; expected one of: name, gender, the"
+    )
 
 
 def test_english_says_a_toy_of_no_lexicon_as_its_id() -> None:
@@ -288,7 +291,10 @@ def sweep(language: str) -> Iterator[tuple[str, str]]:
         for index in range(len(variants)):
             toy = toys[turn % len(toys)] if takes_toy else ""
             turn += takes_toy
-            yield f"{key}[{index}] {toy}", book.render(key, index, **said_values(language, key, book, toy))
+            yield (
+                f"{key}[{index}] {toy}",
+                book.render(key, index, **said_values(language, key, book, toy)),
+            )
     for toy in toys[turn:]:
         yield f"guess.names[0] {toy}", book.render("guess.names", 0, child="Sam", toy=toy)
 
@@ -328,7 +334,9 @@ def test_every_line_renders_with_real_espeak_ng(language: str, tmp_path: Path) -
         per_character = seconds / len(text)
         rates.append(per_character)
         if not low <= per_character <= high or level < 300:
-            odd.append(f"{where}: {text!r}: {seconds:.2f} s, {per_character:.3f} s/char, {level:.0f}")
+            odd.append(
+                f"{where}: {text!r}: {seconds:.2f} s, {per_character:.3f} s/char, {level:.0f}"
+            )
     print(f"{language}: {len(lines)} lines, s/char min {min(rates):.3f} "
           f"median {float(np.median(rates)):.3f} max {max(rates):.3f}")  # fmt: skip
     assert odd == []
@@ -426,7 +434,9 @@ def test_the_german_example_checks_and_speaks_german(tmp_path: Path, capsys) -> 
     assert (config.language, config.voice.voice) == ("de", "de")
     assert main(["check", "--config", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "voice          ok    spoke the test line via espeak-ng (language 'de', voice 'de')" in out
+    assert (
+        "voice          ok    spoke the test line via espeak-ng (language 'de', voice 'de')" in out
+    )
     (wav,) = (tmp_path / "wavs").glob("*.wav")
     seconds, _ = wav_seconds(wav)
     greeting = phrasebook_for(config).render("session.greeting", 0)
@@ -468,6 +478,19 @@ def test_a_plan_records_its_language() -> None:
 
     config = with_language(demo_config(), "it")
     assert planned(config, SessionPlan(group="g"), 1)["language"] == "it"
-    assert msgspec.json.decode(msgspec.json.encode(planned(demo_config(), SessionPlan(group="g"), 1)))[
-        "language"
-    ] == "en"
+    assert (
+        msgspec.json.decode(msgspec.json.encode(planned(demo_config(), SessionPlan(group="g"), 1)))[
+            "language"
+        ]
+        == "en"
+    )
+
+
+@pytest.mark.parametrize("language", SHIPPED_LANGUAGES)
+def test_pyttsx3_finds_each_languages_voice(language: str) -> None:
+    pyttsx3 = pytest.importorskip("pyttsx3")
+    from hal.voice.pyttsx3_thread import _voice_id
+
+    engine = pyttsx3.init()
+    voice = _voice_id(engine, LANGUAGE_VOICES[language])
+    assert voice.rsplit("/", 1)[-1] == {"en": "en", "fr": "fr"}.get(language, language)

@@ -47,9 +47,9 @@ from hal.clock import LoopClock
 from hal.errors import HalError
 from kasparctl.config import Config, ConfigError, SessionPlan, load_config, servo_backend_given
 from kasparctl.game.events import GameEvent, Listener
+from kasparctl.game.language import phrasebook_for
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.machine import Game, HardwareFault, planned
-from kasparctl.game.language import phrasebook_for
 from kasparctl.game.phrases import PhraseBook, PhrasePicker
 from kasparctl.game.records import FaultSource, Record, SessionEvent, SessionRecord, StepRecord
 from kasparctl.game.session import (

@@ -36,8 +36,8 @@ from hal.voice.api import VoiceOutput
 from hal.voice.sim import SimVoice
 from kasparctl.config import Config, SessionPlan, parse_config
 from kasparctl.game.events import GameEvent, Listener
-from kasparctl.game.machine import Game, planned
 from kasparctl.game.language import phrasebook_for
+from kasparctl.game.machine import Game, planned
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.records import (
     AnyRecord,
