@@ -494,3 +494,26 @@ def test_pyttsx3_finds_each_languages_voice(language: str) -> None:
     engine = pyttsx3.init()
     voice = _voice_id(engine, LANGUAGE_VOICES[language])
     assert voice.rsplit("/", 1)[-1] == {"en": "en", "fr": "fr"}.get(language, language)
+
+
+def test_a_reload_that_changes_the_language_is_refused(tmp_path: Path) -> None:
+    """The voice is built when the service starts: new words without it would be German
+    said by the English voice, so the service keeps its language until it restarts."""
+    from service_fixtures import run_command, running_service
+    from test_service_faults import quick_speaker, reload
+
+    runtime = tmp_path / "run"
+    runtime.mkdir(mode=0o700)
+    config = quick_speaker(tmp_path)
+    env = {"RUNTIME_DIRECTORY": str(runtime)}
+    with running_service(
+        tmp_path, env, command=lambda state: run_command(state, config=config)
+    ) as service:
+        service.notify.wait_for("READY=1")
+        text = config.read_text(encoding="utf-8").replace('language = "en"', 'language = "de"', 1)
+        config.write_text(text, encoding="utf-8")
+        refused = reload(service.process.pid, runtime)
+        assert refused.returncode == 1
+        assert "language: expected 'en' until the service restarts" in refused.stderr
+        assert service.process.poll() is None
+        assert service.stop() == 0

@@ -535,6 +535,14 @@ class Daemon:
         try:
             config = self._load()
             book = phrasebook_for(config)
+            if config.language != self.config.language:
+                # The voice is built at the start: the words must not change without it.
+                raise ConfigError(
+                    "reload",
+                    "language",
+                    f"expected {self.config.language!r} until the service restarts "
+                    f"(the voice changes with it), found {config.language!r}",
+                )
         except Exception as error:  # a bad file must not stop the robot
             log.error("reload failed; keeping the running configuration", error=str(error))
             for token in tokens:
