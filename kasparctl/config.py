@@ -22,8 +22,9 @@ import msgspec
 
 from hal.keyfob.settings import KeyfobSettings, ResearcherSettings
 from hal.servos.settings import ServoSettings
-from hal.voice.settings import VoiceSettings
+from hal.voice.settings import VoiceSettings, voice_for_language
 from kasparctl.learning.learner import LearnerError, LearnerParams
+from kasparctl.lexicon import LexiconError, ToyEntry, ToyWords, resolve, words
 from kasparctl.vocabulary import MAX_CHILDREN, REQUIRED_COMMANDS, Command
 
 DEFAULT_CONFIG_PATH = Path("/etc/kaspar/kaspar.toml")
@@ -282,7 +283,18 @@ class Config(_Settings, frozen=True):
     # Its "happy" and "sad" poses are the game's expressions, a pose named like a pilot
     # location is where Kaspar points for it, and "rest" gives the joints' rest positions.
     poses_file: str | None = None
-    language: str = "en"
+    # What Kaspar speaks: its phrase book, its toys' words and (unless [voice] names
+    # one) its voice. docs/languages.md.
+    language: Annotated[
+        str,
+        msgspec.Meta(
+            pattern=r"^[A-Za-z]{2,3}([_-][A-Za-z0-9]{2,8})*$",
+            extra={"expected": "a language code such as 'en', 'nl', 'de', 'it' or 'fr'"},
+        ),
+    ] = "en"
+    # Toys' words per language, beside or instead of the shipped lexicon
+    # (phrases/toys/<language>.toml): language -> toy id -> { name, gender, the }.
+    toy_names: dict[str, dict[str, ToyEntry]] = {}
     logging: LoggingSettings = LoggingSettings()
     learner: LearnerSettings = LearnerSettings()
     game: GameSettings = GameSettings()
@@ -313,6 +325,16 @@ class Config(_Settings, frozen=True):
     def script(self, plan: SessionPlan) -> str:
         """The uncertainty script a planned session uses: its own, else the game's."""
         return plan.script or self.game.script
+
+    def toy_words(self, language: str | None = None, source: str = "kaspar.toml") -> dict[
+        str, ToyWords
+    ]:
+        """The words of each configured toy in `language` (the configured one by default).
+
+        LexiconError for a toy without words in that language (kasparctl.lexicon.resolve).
+        """
+        language = language or self.language
+        return resolve(language, self.game.toys, self.toy_names.get(language, {}), source)
 
 
 def load_config(path: str | Path, *, poses: bool = True, playable: bool = False) -> Config:
@@ -363,6 +385,10 @@ def parse_config(
         key, message = _explain_validation_error(str(error), raw)
         raise ConfigError(source, key, message) from error
     _validate(config, source)
+    if "voice" not in raw.get("voice", {}):
+        # The voice follows the language unless the file names one.
+        voice = msgspec.structs.replace(config.voice, voice=voice_for_language(config.language))
+        config = msgspec.structs.replace(config, voice=voice)
     if base_dir is not None:
         config = _resolve_paths(config, base_dir)
     if poses and config.poses_file is not None:
@@ -727,6 +753,19 @@ def _validate(config: Config, source: str) -> None:
     _check_sessions(config, fail)
     _check_researcher(config, fail)
     _check_interaction(config.game, fail)
+    _check_toy_names(config, source)
+
+
+def _check_toy_names(config: Config, source: str) -> None:
+    """Every configured toy has its words in the language; every [toy_names] entry is usable."""
+    try:
+        for language, entries in config.toy_names.items():
+            for toy, entry in entries.items():
+                words(entry, language, source, f"toy_names.{language}.{toy}")
+        config.toy_words(source=source)
+    except LexiconError as error:
+        # error.source: kaspar.toml, or the shipped lexicon an entry came from.
+        raise ConfigError(error.source, error.key, error.message) from error
 
 
 def _check_learner(learner: LearnerSettings, fail: _Fail) -> None:

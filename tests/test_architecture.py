@@ -17,6 +17,7 @@ KASPARCTL_FLOORS: dict[str, int] = {
     "kasparctl": 0,
     "kasparctl.learning": 1,
     "kasparctl.vocabulary": 1,
+    "kasparctl.lexicon": 1,
     "kasparctl.config": 2,
     "kasparctl.log": 2,
     "kasparctl.body": 3,

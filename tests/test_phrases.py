@@ -427,7 +427,8 @@ def test_unknown_placeholder():
         lambda d: d["guess"].update(names=["{child}, is this the {toy}?", "Is it {tey}?"])
     )
     assert error_of(document) == (
-        "fixture.toml: guess.names[1]: expected placeholders from {child}, {toy}, found {tey}"
+        "fixture.toml: guess.names[1]: expected placeholders from {child}, {the_toy}, {toy}, "
+        "found {tey}"
     )
 
 
@@ -441,7 +442,8 @@ def test_placeholder_where_none_is_allowed():
 def test_positional_placeholder():
     document = broken(lambda d: d["guess"].update(names=["Is this the {}?"]))
     assert error_of(document) == (
-        "fixture.toml: guess.names[0]: expected placeholders from {child}, {toy}, found {}"
+        "fixture.toml: guess.names[0]: expected placeholders from {child}, {the_toy}, {toy}, "
+        "found {}"
     )
 
 

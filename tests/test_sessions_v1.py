@@ -147,6 +147,7 @@ def test_export_is_what_it_was(tmp_path: Path, anonymise: bool) -> None:
             assert row["robot"] == "" and row["participant"] == ""
             # Planned before scripts: the five varied bands, with the words of then.
             assert (row["script"], row["script_version"]) == ("varied", "0")
+            assert row["language"] == "en"  # planned before languages were recorded
     _, rows = as_written_then(trials)
     flagged = [r for r in rows if "TRUE" in (r["perseverative"], r["win_shift"])]
     assert flagged and all(r["error_cause"] in ("exploratory", "after_wrong_feedback") for r in flagged)

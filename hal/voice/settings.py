@@ -31,6 +31,16 @@ ClipPath = Annotated[
 ]
 
 
+# The espeak-ng voice of each language Kaspar speaks (`espeak-ng --voices` lists them);
+# the configuration takes it from its language unless [voice] names a voice.
+LANGUAGE_VOICES = {"en": "en-gb", "nl": "nl", "de": "de", "it": "it", "fr": "fr-fr"}
+
+
+def voice_for_language(language: str) -> str:
+    """The voice for `language`: LANGUAGE_VOICES', else espeak-ng's voice of that name."""
+    return LANGUAGE_VOICES.get(language, language.lower().replace("_", "-"))
+
+
 class VoiceSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only=True):
     """Engine, voice, rate, volume, timeout, recorded clips and where the sound goes."""
 
@@ -40,6 +50,7 @@ class VoiceSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_
     # (inaudible) but a hung one is killed, and it shares no state with this
     # process (docs/keyfob-and-voice.md has the bench). The other is the fallback.
     engine: Literal["pyttsx3", "espeak-ng"] = "espeak-ng"
+    # The default is English's; kaspar.toml's language chooses another (LANGUAGE_VOICES).
     voice: VoiceName = "en-gb"
     # A little slower than espeak's 175 for young listeners.
     rate: Annotated[int, msgspec.Meta(ge=80, le=450, extra={"unit": "words per minute"})] = 150

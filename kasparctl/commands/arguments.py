@@ -17,6 +17,7 @@ import argparse
 import errno
 import math
 import os
+import re
 import sys
 from collections.abc import Callable
 
@@ -52,6 +53,15 @@ def number(
 
     parse.__name__ = "number"  # argparse names the type in its own messages
     return parse
+
+
+def language(text: str) -> str:
+    """An argparse type: a language code such as "de" (letters, then "-" or "_" parts)."""
+    if not re.fullmatch(r"[A-Za-z]{2,3}(?:[_-][A-Za-z0-9]{2,8})*", text):
+        raise argparse.ArgumentTypeError(
+            f"expected a language code such as 'en', 'nl', 'de', 'it' or 'fr', found {text!r}"
+        )
+    return text
 
 
 def whole(low: int, high: int) -> Callable[[str], int]:

@@ -21,6 +21,7 @@ from collections.abc import Awaitable, Callable, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
+import msgspec
 import structlog
 
 from hal.clock import Clock
@@ -30,6 +31,7 @@ from hal.keyfob.gestures import ANSWERS_ONLY, GREEN, RED
 from hal.servos.joints import Joints
 from hal.servos.sim import SimServos
 from hal.voice.api import VoiceOutput
+from hal.voice.settings import voice_for_language
 from kasparctl.config import Config
 
 log = structlog.get_logger("kasparctl.bringup")
@@ -116,7 +118,12 @@ class Engineer:
         if self.config.voice.backend == "real" and not self.quiet:
             from hal.voice.speaker import Voice
 
-            self.voice = Voice(self.config.voice, self.clock)
+            # The engineer's prompts are English: said with the English voice whatever
+            # language the children hear (a German voice would mangle them).
+            settings = self.config.voice
+            if self.config.language != "en":
+                settings = msgspec.structs.replace(settings, voice=voice_for_language("en"))
+            self.voice = Voice(settings, self.clock)
         if self.config.keyfob.backend == "real" and self.seconds is None:
             from hal.keyfob.reader import Keyfob
 

@@ -27,10 +27,12 @@ from kasparctl.config import (
     load_config,
     servo_backend_given,
 )
-from kasparctl.game.phrases import PhraseError, load_phrasebook
+from kasparctl.game.language import phrasebook_for
+from kasparctl.game.phrases import PhraseError
 from kasparctl.log import configure_logging
 
-TEST_LINE = "Hello, I am Kaspar. My voice is working."
+# The voice check's test line: Kaspar's greeting, in the configured language.
+TEST_KEY = "session.greeting"
 NO_BACKEND = (
     "no [servos] table with its backend: the servos would be simulated without a word; "
     "say backend = 'real' with the robot's buses and joints (systemd/kaspar-3.toml), "
@@ -65,7 +67,7 @@ def run(arguments: argparse.Namespace) -> int:
     path = arguments.config or default_config_path()
     try:
         config = load_config(path, playable=True)
-        phrasebook = load_phrasebook(config.language, config.phrases_dir)
+        phrasebook = phrasebook_for(config)
     except (ConfigError, PhraseError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
@@ -200,13 +202,14 @@ async def _voice(config: Config, speak: bool) -> list[Result]:
             settings = msgspec.structs.replace(settings, wav_dir=scratch)
         voice = Voice(settings, MonotonicClock())
         try:
-            spoken = await voice.say(TEST_LINE)
+            spoken = await voice.say(phrasebook_for(config).render(TEST_KEY, 0))
         finally:
             await voice.close()
     if not spoken.finished:
         return [Result("voice", False, f"{spoken.status.value}: {spoken.error or 'no detail'}")]
     done = "spoke the test line" if speak else "rendered the test line silently"
-    return [Result("voice", True, f"{done} via {spoken.via}")]
+    said = f"language {config.language!r}, voice {config.voice.voice!r}"
+    return [Result("voice", True, f"{done} via {spoken.via} ({said})")]
 
 
 def _print_table(results: list[Result]) -> None:

@@ -19,8 +19,16 @@ import tempfile
 from pathlib import Path
 from typing import Any, TextIO, cast
 
-from kasparctl.commands.arguments import PROBABILITY, UsageError, number, seed, stdin_readable
+from kasparctl.commands.arguments import (
+    PROBABILITY,
+    UsageError,
+    language,
+    number,
+    seed,
+    stdin_readable,
+)
 from kasparctl.config import Config, ConfigError, load_config
+from kasparctl.game.language import with_language
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.phrases import PhraseError
 from kasparctl.game.session import SessionError
@@ -68,6 +76,13 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--config", default=None, help="kaspar.toml (default: the demo robot)")
     parser.add_argument("--variant", choices=("names", "pilot"), default=None)
+    parser.add_argument(
+        "--language",
+        type=language,
+        default=None,
+        metavar="L",
+        help="Kaspar speaks L (en, nl, de, it, fr): its phrases, toys and voice",
+    )
     parser.add_argument("--p-wrong-green", type=PROBABILITY, default=0.0)
     parser.add_argument("--p-wrong-red", type=PROBABILITY, default=0.0)
     parser.add_argument("--p-no-answer", type=PROBABILITY, default=0.0)
@@ -114,6 +129,8 @@ def run(arguments: argparse.Namespace) -> int:
         return 1
     try:
         config = load_config(arguments.config, playable=True) if arguments.config else demo_config()
+        if arguments.language:
+            config = with_language(config, arguments.language)
         if arguments.variant and arguments.variant != config.game.variant:
             config = with_variant(config, arguments.variant)
         teacher = Teacher(arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)

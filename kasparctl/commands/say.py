@@ -12,9 +12,10 @@ from typing import Any
 import msgspec
 
 from hal.voice.api import Spoken
-from hal.voice.settings import VoiceSettings
+from hal.voice.settings import VoiceSettings, voice_for_language
 from hal.voice.sinks import WavSink
 from hal.voice.speaker import Voice
+from kasparctl.commands.arguments import language
 from kasparctl.config import DEFAULT_CONFIG_PATH, ConfigError, load_config
 from kasparctl.log import configure_logging
 
@@ -26,6 +27,12 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--wav", metavar="FILE", help="write a WAV file instead of playing it")
     parser.add_argument("--key", help="phrase key: its recorded clip plays if one is configured")
     parser.add_argument("--engine", choices=("pyttsx3", "espeak-ng"), help="override the engine")
+    parser.add_argument(
+        "--language",
+        type=language,
+        metavar="L",
+        help="speak with the voice of language L (en, nl, de, it, fr)"
+    )
     parser.add_argument(
         "--config",
         default=None,
@@ -40,6 +47,8 @@ def voice_settings(arguments: argparse.Namespace) -> VoiceSettings:
     if path is None and DEFAULT_CONFIG_PATH.exists():
         path = str(DEFAULT_CONFIG_PATH)
     settings = load_config(path).voice if path else VoiceSettings()
+    if arguments.language:
+        settings = msgspec.structs.replace(settings, voice=voice_for_language(arguments.language))
     if arguments.engine:
         settings = msgspec.structs.replace(settings, engine=arguments.engine)
     return settings

@@ -167,7 +167,7 @@ def planned(config: Config, plan: SessionPlan, seed: int | None) -> dict[str, An
     """A session's plan.json (less its id and creation time, which Session.create adds).
 
     The group, its session number, the condition, the variant, the learner's seed,
-    the uncertainty script and its version, and the plan entry itself.
+    the uncertainty script and its version, the language, and the plan entry itself.
     """
     chosen = script(config.script(plan))
     return {
@@ -178,6 +178,8 @@ def planned(config: Config, plan: SessionPlan, seed: int | None) -> dict[str, An
         "seed": seed,
         "script": chosen.name,
         "script_version": chosen.version,
+        # What Kaspar spoke (sessions planned before languages were recorded spoke "en").
+        "language": config.language,
         "plan": msgspec.to_builtins(plan),
         # Frozen at the start: a resume uses these, whatever the configuration says then.
         "learner": frozen_learner(plan.profile, config.profile(plan.profile)),

@@ -47,6 +47,7 @@ from kasparctl.game.scripts import (
     SURE_LEFT,
 )
 from kasparctl.game.scripts import Band as Band  # figures shade a script's bands
+from kasparctl.lexicon import TOY_FORMS, ToyWords, shipped_words
 
 
 class PhraseError(Exception):
@@ -90,6 +91,8 @@ _OFTEN: Final = 3
 # there are ("3", "6"); {toy} a toy's name; {location} a pilot location's name;
 # {where} how a location is said in a sentence ("in the box"); {child}, {mover},
 # {presser} a child's first name or names.child; {number} a child's number.
+# A line whose key takes {toy} is given the toy's id and may say any of its forms
+# (TOY_FORMS, kasparctl.lexicon): {toy} the noun alone, {the_toy} with its article.
 REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
     {
         "names.child": _spec(
@@ -178,6 +181,8 @@ class PhraseBook:
     # Key -> variants; the first is the fixed script's wording.
     lines: Mapping[str, tuple[str, ...]]
     placeholders: Mapping[str, frozenset[str]] = field(repr=False)
+    # Toy id -> its words in this language ({toy}, {the_toy}); kasparctl.lexicon.
+    toys: Mapping[str, ToyWords] = field(default_factory=dict, repr=False)
 
     @property
     def keys(self) -> tuple[str, ...]:
@@ -214,7 +219,26 @@ class PhraseBook:
         if not 0 <= index < len(variants):
             self._fail(key, f"expected a variant index 0 to {len(variants) - 1}, found {index}")
         self.check_values(key, values)
-        return variants[index].format_map(values)
+        return variants[index].format_map(self._with_toy_forms(key, values))
+
+    def _with_toy_forms(self, key: str, values: Mapping[str, str]) -> Mapping[str, str]:
+        """`values` with the toy's id replaced by its forms in this book's language."""
+        if "toy" not in values:
+            return values
+        toy = values["toy"]
+        found = self.toys.get(toy)
+        if found is None:
+            if self.language != "en":
+                known = ", ".join(sorted(self.toys)) or "none"
+                self._fail(
+                    key,
+                    f"expected a toy with {self.language!r} words (phrases/toys/"
+                    f"{self.language}.toml or [toy_names.{self.language}]: {known}), "
+                    f"found {toy!r}",
+                )
+            # English says a toy it has no entry for as its id: "the teddy".
+            found = ToyWords(name=toy, the=f"the {toy}")
+        return {**values, **found.forms()}
 
     def check_values(self, key: str, values: Mapping[str, object]) -> None:
         """Raise PhraseError unless `values` fill exactly the placeholders allowed for `key`."""
@@ -344,8 +368,16 @@ def pick_index(count: int, rng: np.random.Generator, avoid: int | None) -> int:
 # Loading ---------------------------------------------------------------------
 
 
-def load_phrasebook(language: str = "en", override_dir: str | None = None) -> PhraseBook:
-    """The phrases for `language`: from override_dir if given, else the shipped ones."""
+def load_phrasebook(
+    language: str = "en",
+    override_dir: str | None = None,
+    toys: Mapping[str, ToyWords] | None = None,
+) -> PhraseBook:
+    """The phrases for `language`: from override_dir if given, else the shipped ones.
+
+    `toys` are the words of the configuration's toys (Config.toy_words); without them
+    the book says the toys of the shipped lexicon of `language`.
+    """
     where = override_dir if override_dir is not None else _SHIPPED_PACKAGE
     if not _LANGUAGE.fullmatch(language):
         # Also keeps a language like "../x" from reading outside the directory.
@@ -359,7 +391,7 @@ def load_phrasebook(language: str = "en", override_dir: str | None = None) -> Ph
             data = path.read_bytes()
         except OSError as error:
             raise PhraseError(str(path), "(file)", f"cannot read it: {error.strerror}") from error
-        return parse_phrasebook(data, str(path), language)
+        return parse_phrasebook(data, str(path), language, toys)
     resource = importlib.resources.files(_SHIPPED_PACKAGE) / filename
     try:
         data = resource.read_bytes()
@@ -374,11 +406,17 @@ def load_phrasebook(language: str = "en", override_dir: str | None = None) -> Ph
             "(file)",
             f"expected one of the shipped languages ({', '.join(shipped)}), found {language!r}",
         ) from error
-    return parse_phrasebook(data, str(resource), language)
+    return parse_phrasebook(data, str(resource), language, toys)
 
 
-def parse_phrasebook(data: bytes | str, source: str, language: str = "en") -> PhraseBook:
-    """Validate a phrase file's text; `source` names it in errors."""
+def parse_phrasebook(
+    data: bytes | str,
+    source: str,
+    language: str = "en",
+    toys: Mapping[str, ToyWords] | None = None,
+) -> PhraseBook:
+    """Validate a phrase file's text; `source` names it in errors. `toys` as in
+    load_phrasebook."""
 
     def fail(key: str, message: str) -> NoReturn:
         raise PhraseError(source, key, message)
@@ -406,6 +444,7 @@ def parse_phrasebook(data: bytes | str, source: str, language: str = "en") -> Ph
         language=language,
         lines=MappingProxyType(lines),
         placeholders=MappingProxyType(placeholders),
+        toys=MappingProxyType(dict(shipped_words(language) if toys is None else toys)),
     )
 
 
@@ -454,8 +493,13 @@ def _check_lines(value: Any, key: str, spec: LineSpec, fail: Fail) -> tuple[str,
         if text in seen:
             fail(where, f"expected a different variant, found a repeat of {key}[{seen[text]}]")
         seen[text] = index
-        _check_format(text, where, spec.placeholders, fail)
+        _check_format(text, where, _sayable(spec.placeholders), fail)
     return tuple(value)
+
+
+def _sayable(placeholders: frozenset[str]) -> frozenset[str]:
+    """What a line may say: its key's placeholders, and every form of a toy it is given."""
+    return placeholders | frozenset(TOY_FORMS) if "toy" in placeholders else placeholders
 
 
 def _check_format(text: str, key: str, allowed: frozenset[str], fail: Fail) -> None:

@@ -71,6 +71,8 @@ class PlanFile(msgspec.Struct, kw_only=True, frozen=True):
     # The uncertainty script Kaspar spoke; sessions from before scripts spoke "varied".
     script: str = "varied"
     script_version: int = 0
+    # The language Kaspar spoke; sessions from before it was recorded spoke English.
+    language: str = "en"
 
 
 @dataclass(frozen=True)
@@ -166,6 +168,11 @@ class SessionData:
         return self.meta.script, self.meta.script_version
 
     @property
+    def language(self) -> str:
+        """The language Kaspar spoke; "en" for a session planned before it was recorded."""
+        return self.meta.language
+
+    @property
     def identity(self) -> dict[str, object]:
         """The columns that name a session and its condition, first in every table of it."""
         return {
@@ -177,6 +184,7 @@ class SessionData:
             "profile": self.profile,
             "speak_uncertainty": self.speak_uncertainty,
             "variant": self.variant,
+            "language": self.language,
         }
 
     @property

@@ -47,9 +47,10 @@ from hal.clock import LoopClock
 from hal.errors import HalError
 from kasparctl.config import Config, ConfigError, SessionPlan, load_config, servo_backend_given
 from kasparctl.game.events import GameEvent, Listener
+from kasparctl.game.language import phrasebook_for
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.machine import Game, HardwareFault, planned
-from kasparctl.game.phrases import PhraseBook, PhrasePicker, load_phrasebook
+from kasparctl.game.phrases import PhraseBook, PhrasePicker
 from kasparctl.game.records import FaultSource, Record, SessionEvent, SessionRecord, StepRecord
 from kasparctl.game.session import (
     PLAN_FILE,
@@ -218,7 +219,7 @@ class Daemon:
             # For an engineer to prove the watchdog restarts a hung service.
             loop.add_signal_handler(signal.SIGUSR2, self._block_loop)
         # Read once (a broken file stops the start, before READY), and again at a reload.
-        self._book = load_phrasebook(self.config.language, self.config.phrases_dir)
+        self._book = phrasebook_for(self.config)
         if self.hw is None:
             self.hw = self._build_hardware()
         await self._open_hardware()
@@ -533,7 +534,15 @@ class Daemon:
         tokens, self._reload_tokens = self._reload_tokens, []
         try:
             config = self._load()
-            book = load_phrasebook(config.language, config.phrases_dir)
+            book = phrasebook_for(config)
+            if config.language != self.config.language:
+                # The voice is built at the start: the words must not change without it.
+                raise ConfigError(
+                    "reload",
+                    "language",
+                    f"expected {self.config.language!r} until the service restarts "
+                    f"(the voice changes with it), found {config.language!r}",
+                )
         except Exception as error:  # a bad file must not stop the robot
             log.error("reload failed; keeping the running configuration", error=str(error))
             for token in tokens:

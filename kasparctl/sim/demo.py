@@ -36,8 +36,9 @@ from hal.voice.api import VoiceOutput
 from hal.voice.sim import SimVoice
 from kasparctl.config import Config, SessionPlan, parse_config
 from kasparctl.game.events import GameEvent, Listener
+from kasparctl.game.language import phrasebook_for
 from kasparctl.game.machine import Game, planned
-from kasparctl.game.phrases import PhrasePicker, load_phrasebook
+from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.records import (
     AnyRecord,
     CommandRecord,
@@ -63,6 +64,16 @@ from kasparctl.sim.teacher import DEFAULT_THINK_S, Messiness, Teacher
 BUDGET_WPM = 150
 
 
+# How the demo's pilot locations are said in each language, after "goes" ("gehört", "va").
+_DEMO_PLACES: dict[str, dict[str, str]] = {
+    "en": {"box": "in the box", "shelf": "on the shelf", "basket": "in the basket"},
+    "de": {"box": "in die Kiste", "shelf": "ins Regal", "basket": "in den Korb"},
+    "nl": {"box": "in de doos", "shelf": "op de plank", "basket": "in de mand"},
+    "it": {"box": "nella scatola", "shelf": "sullo scaffale", "basket": "nel cestino"},
+    "fr": {"box": "dans la boîte", "shelf": "sur l'étagère", "basket": "dans le panier"},
+}
+
+
 def with_variant(config: Config, variant: str) -> Config:
     """The demo robot playing the names game or the pilot (three locations it can point at)."""
     if variant == config.game.variant:
@@ -73,7 +84,7 @@ def with_variant(config: Config, variant: str) -> Config:
             "shelf": {"right_shoulder_pitch": -70.0, "right_shoulder_roll": 40.0},
             "basket": {"right_shoulder_pitch": -30.0, "right_shoulder_roll": 70.0},
         }
-        phrases = {"box": "in the box", "shelf": "on the shelf", "basket": "in the basket"}
+        phrases = _DEMO_PLACES.get(config.language, _DEMO_PLACES["en"])
         game = msgspec.structs.replace(
             config.game,
             variant="pilot",
@@ -310,7 +321,7 @@ def assemble(
         keyfob: SimKeyfob = TerminalKeyfob(clock, researcher=researcher, commands=keypad)
     else:
         keyfob = SimKeyfob(clock, commands=keypad)
-    book = load_phrasebook(config.language, config.phrases_dir)
+    book = phrasebook_for(config)
     picker = PhrasePicker(book, np.random.default_rng([options.seed, 2]))
     plan = config.sessions[0] if config.sessions else SessionPlan(group="demo")
     outcome = resume_or_abandon(options.state_dir, config.game, config.profile)
