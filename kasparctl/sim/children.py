@@ -25,10 +25,11 @@ from hal.keyfob.sim import CHORD_LAG, PRESS_GAP, PRESS_HOLD, SimKeyfob
 from hal.servos.settings import ServoSettings
 from kasparctl.game.events import GameEvent
 from kasparctl.game.records import FaultSource
+from kasparctl.game.recovery import to_reopen
 from kasparctl.sim.teacher import Messiness, Teacher
 
 Say = Callable[[str], None]
-# The researcher's command ("next", "pause", "undo", "stop"), given however they give them.
+# The researcher's command ("next", "pause", "undo", "stop", "reopen"), however they give them.
 Command = Callable[[str], Awaitable[None]]
 MAX_RESUMES = 3
 # Where a child shows a bag is where the bag is, give or take this much (degrees).
@@ -136,6 +137,8 @@ class SimulatedGroup:
             self._spawn(self._answer(trial, target, choice, honest_now=True))
         elif event is GameEvent.TEACH:
             self._spawn(self._teach(int(info["bag"])))
+        elif event is GameEvent.CONFUSED:
+            self._spawn(self._researcher_reopens(info["learned"]))
         elif _calls_researcher(event, info) and not self._resuming:
             # One researcher at a time: a fault can be announced twice.
             self._resuming = True
@@ -189,6 +192,15 @@ class SimulatedGroup:
             await self.command(command)
         finally:
             self._resuming = False
+
+    async def _researcher_reopens(self, learned: list[tuple[int, int]]) -> None:
+        """Kaspar is confused and asks: the researcher, who knows what is in each bag,
+        re-opens the names learned last down to the one learned wrong (none if all are
+        right), one command at a time."""
+        for _ in range(to_reopen(learned, self.answers)):
+            await asyncio.sleep(self.researcher_s)
+            self.narrate("the researcher gives REOPEN")
+            await self.command("reopen")
 
     def _reply(self, target: int, choice: int, honest_now: bool) -> bool | None:
         correct = choice == self.answers[target]
