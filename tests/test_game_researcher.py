@@ -29,7 +29,7 @@ from kasparctl.sim.demo import demo_config
 from kasparctl.vocabulary import Command
 
 C = Confirmation
-N, P, U, S, O = Command.NEXT, Command.PAUSE, Command.UNDO, Command.STOP, Command.REOPEN
+N, P, U, S, R = Command.NEXT, Command.PAUSE, Command.UNDO, Command.STOP, Command.REOPEN
 
 # Every (stage, command): what it confirms with the facts all false, and all true.
 # All true: the bags are taught, an answer can be undone, the keyfob is connected, a
@@ -39,52 +39,52 @@ TABLE: dict[tuple[str, Command], tuple[Confirmation | None, Confirmation | None]
     ("idle", P): (None, None),
     ("idle", U): (None, None),
     ("idle", S): (None, None),
-    ("idle", O): (None, None),
+    ("idle", R): (None, None),
     ("placing", N): (C.NEXT_STEP, C.NEXT_STEP),
     ("placing", P): (C.PAUSE, C.PAUSE),
     ("placing", U): (None, None),
     ("placing", S): (C.STOP, C.STOP),
-    ("placing", O): (None, None),
+    ("placing", R): (None, None),
     ("teaching", N): (None, C.NEXT_STEP),  # only once every bag is taught
     ("teaching", P): (C.PAUSE, C.PAUSE),
     ("teaching", U): (None, None),
     ("teaching", S): (C.STOP, C.STOP),
-    ("teaching", O): (None, None),
+    ("teaching", R): (None, None),
     ("revealing", N): (C.NEXT_STEP, C.NEXT_STEP),
     ("revealing", P): (C.PAUSE, C.PAUSE),
     ("revealing", U): (None, None),
     ("revealing", S): (C.STOP, C.STOP),
-    ("revealing", O): (None, None),
+    ("revealing", R): (None, None),
     ("guessing", N): (None, None),  # step 4 ends by itself
     ("guessing", P): (C.PAUSE, C.PAUSE),
     ("guessing", U): (None, C.UNDO),  # only with an answer to take back
     ("guessing", S): (C.STOP, C.STOP),
-    ("guessing", O): (None, C.REOPEN),  # only with a learned name and a target still open
+    ("guessing", R): (None, C.REOPEN),  # only with a learned name and a target still open
     ("farewell", N): (None, None),
     ("farewell", P): (None, None),
     ("farewell", U): (None, None),
     ("farewell", S): (C.STOP, C.STOP),
-    ("farewell", O): (None, None),
+    ("farewell", R): (None, None),
     ("finished", N): (None, None),
     ("finished", P): (None, None),
     ("finished", U): (None, None),
     ("finished", S): (None, None),
-    ("finished", O): (None, None),
+    ("finished", R): (None, None),
     ("paused", N): (None, None),
     ("paused", P): (C.RESUME, C.RESUME),
     ("paused", U): (None, None),
     ("paused", S): (C.STOP, C.STOP),
-    ("paused", O): (None, None),
+    ("paused", R): (None, None),
     ("fault", N): (None, None),
     ("fault", P): (None, C.RESUME),  # only once the keyfob is back
     ("fault", U): (None, None),
     ("fault", S): (C.STOP, C.STOP),
-    ("fault", O): (None, None),
+    ("fault", R): (None, None),
     ("stopped", N): (None, None),
     ("stopped", P): (None, None),
     ("stopped", U): (None, None),
     ("stopped", S): (None, None),
-    ("stopped", O): (None, None),
+    ("stopped", R): (None, None),
 }
 
 

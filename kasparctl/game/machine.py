@@ -54,10 +54,10 @@ from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import ANSWERS_ONLY, Gesture, GestureKind
 from hal.servos.api import Fault
 from kasparctl.config import Config, SessionPlan
+from kasparctl.game import recovery
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.presses import ChildPresses, Press
-from kasparctl.game import recovery
 from kasparctl.game.records import (
     Button,
     CommandRecord,

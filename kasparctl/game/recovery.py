@@ -53,7 +53,9 @@ def all_rejected(offered: Sequence[bool], rejected: Sequence[int]) -> bool:
     return bool(names) and set(names) <= set(rejected)
 
 
-def confusion(state: GameState, record: TrialRecord, settings: GameSettings) -> ConfusedRecord | None:
+def confusion(
+    state: GameState, record: TrialRecord, settings: GameSettings
+) -> ConfusedRecord | None:
     """Whether Kaspar is confused after `record`, applied to `state` (None: it is not,
     it said so already for this target, or the session was planned without recovery)."""
     if record.rejected is UNSET:
@@ -71,9 +73,9 @@ def confusion(state: GameState, record: TrialRecord, settings: GameSettings) -> 
         if elsewhere:
             reason, name = LEARNED_ELSEWHERE, record.choice
             learned_for = settings.targets[elsewhere[-1]]
-    if reason is None and not state.progress[target].done:
-        if all_rejected(state.offered, record.rejected):
-            reason = ALL_REJECTED
+    stuck = not state.progress[target].done and all_rejected(state.offered, record.rejected)
+    if reason is None and stuck:
+        reason = ALL_REJECTED
     if reason is None:
         return None
     reopen = reopen_record(state, settings, ignore_done=True)

@@ -62,7 +62,7 @@ class UndoEntry(msgspec.Struct, frozen=True):
     # `progress` is above (kasparctl.game.recovery).
     reopened: int | UnsetType = UNSET
     learned_order: list[int] | UnsetType = UNSET
-    confused: int | None | UnsetType = UNSET
+    confused: int | UnsetType | None = UNSET
     # The labels rejected on `target` before the answer.
     rejected: list[int] | UnsetType = UNSET
 
@@ -99,7 +99,7 @@ class GameState(msgspec.Struct, eq=False):
     # the targets learned, in the order they were learned (a re-open takes the last);
     learned_order: list[int] | UnsetType = UNSET
     # the target Kaspar said it is confused about, until it is done or a name re-opened.
-    confused: int | None | UnsetType = UNSET
+    confused: int | UnsetType | None = UNSET
 
     @classmethod
     def new(cls, settings: GameSettings, params: LearnerParams, seed: int | None) -> GameState:

@@ -144,15 +144,13 @@ def simulate_group(
                     if recover and progress.done
                     else _next_state(target, progress.done, n_targets)
                 )
-                table = update(
-                    table, target, choice, params.reward(feedback), params, next_state
-                )
+                table = update(table, target, choice, params.reward(feedback), params, next_state)
             trials[target].append(TrialRecord(choice, feedback, entropy, correct))
             confused = recover and doubt.answered(target, choice, feedback, progresses, offered)
             # The game takes no re-open once every target is done: the guessing is over.
-            if confused and not all(p.done for p in progresses):
-                if doubt.reopen(progresses, offered, answers):
-                    candidates = offered.copy()
+            open_left = not all(p.done for p in progresses)
+            if confused and open_left and doubt.reopen(progresses, offered, answers):
+                candidates = offered.copy()
         last_candidates[target] = candidates
         if progress.learned is not None:
             doubt.learned(target)
