@@ -113,6 +113,9 @@ class SimulatedGroup:
         self._tasks: set[asyncio.Task[None]] = set()
         self._silent_question: tuple[int, int, int] | None = None
         self._answered: set[int] = set()
+        # The question being asked (trial, target, choice): one abandoned (a re-open or an
+        # undo asks anew, under the same number) is answered no more.
+        self._asking: tuple[int, int, int] | None = None
         self._room = room if room is not None else rng
         self._bag_poses: dict[int, dict[str, float]] = {}
         self._faults = 0
@@ -126,6 +129,10 @@ class SimulatedGroup:
         if event is GameEvent.WAITING_FOR_RESEARCHER:
             self._spawn(self._researcher_next())
         elif event is GameEvent.ASKING:
+            if "trial" in info:
+                self._asking = (int(info["trial"]), int(info["target"]), int(info["choice"]))
+                if self._silent_question != self._asking:
+                    self._silent_question = None
             self._spawn(self._eager(info))
         elif event is GameEvent.QUESTION:
             self._spawn(self._answer(int(info["trial"]), int(info["target"]), int(info["choice"])))
@@ -218,7 +225,7 @@ class SimulatedGroup:
         meant = "green" if choice == self.answers[target] else "red"
         action = self.messiness.action(meant, self.rng)
         async with self._keyfob_free:
-            if trial not in self._answered:
+            if trial not in self._answered and self._asking == (trial, target, choice):
                 await self._press(action, "an eager child", trial=trial, button=meant, early=True)
 
     async def _answer(self, trial: int, target: int, choice: int, honest_now: bool = False) -> None:
@@ -231,7 +238,8 @@ class SimulatedGroup:
         button = "green" if reply else "red"
         action = self.messiness.action(button, self.rng)
         async with self._keyfob_free:
-            if trial not in self._answered:  # an eager press may have answered it
+            # An eager press may have answered it, or it was abandoned and asked anew.
+            if trial not in self._answered and self._asking == (trial, target, choice):
                 await self._press(action, "a child", trial=trial, button=button)
 
     async def _teach(self, bag: int) -> None:
