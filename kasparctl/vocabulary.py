@@ -16,6 +16,9 @@ class Command(enum.StrEnum):
     PAUSE = "pause"
     UNDO = "undo"
     STOP = "stop"
+    # Re-open the name learned last: it is offered again and its bag asked again
+    # (kasparctl.game.recovery). Kaspar asks for it when it is confused.
+    REOPEN = "reopen"
 
 
 # Commands a session cannot be run without: every configuration must map a gesture to each.

@@ -29,51 +29,62 @@ from kasparctl.sim.demo import demo_config
 from kasparctl.vocabulary import Command
 
 C = Confirmation
-N, P, U, S = Command.NEXT, Command.PAUSE, Command.UNDO, Command.STOP
+N, P, U, S, R = Command.NEXT, Command.PAUSE, Command.UNDO, Command.STOP, Command.REOPEN
 
 # Every (stage, command): what it confirms with the facts all false, and all true.
-# All true: the bags are taught, an answer can be undone, the keyfob is connected.
+# All true: the bags are taught, an answer can be undone, the keyfob is connected, a
+# learned name can be re-opened (kasparctl.game.recovery).
 TABLE: dict[tuple[str, Command], tuple[Confirmation | None, Confirmation | None]] = {
     ("idle", N): (C.START, C.START),
     ("idle", P): (None, None),
     ("idle", U): (None, None),
     ("idle", S): (None, None),
+    ("idle", R): (None, None),
     ("placing", N): (C.NEXT_STEP, C.NEXT_STEP),
     ("placing", P): (C.PAUSE, C.PAUSE),
     ("placing", U): (None, None),
     ("placing", S): (C.STOP, C.STOP),
+    ("placing", R): (None, None),
     ("teaching", N): (None, C.NEXT_STEP),  # only once every bag is taught
     ("teaching", P): (C.PAUSE, C.PAUSE),
     ("teaching", U): (None, None),
     ("teaching", S): (C.STOP, C.STOP),
+    ("teaching", R): (None, None),
     ("revealing", N): (C.NEXT_STEP, C.NEXT_STEP),
     ("revealing", P): (C.PAUSE, C.PAUSE),
     ("revealing", U): (None, None),
     ("revealing", S): (C.STOP, C.STOP),
+    ("revealing", R): (None, None),
     ("guessing", N): (None, None),  # step 4 ends by itself
     ("guessing", P): (C.PAUSE, C.PAUSE),
     ("guessing", U): (None, C.UNDO),  # only with an answer to take back
     ("guessing", S): (C.STOP, C.STOP),
+    ("guessing", R): (None, C.REOPEN),  # only with a learned name and a target still open
     ("farewell", N): (None, None),
     ("farewell", P): (None, None),
     ("farewell", U): (None, None),
     ("farewell", S): (C.STOP, C.STOP),
+    ("farewell", R): (None, None),
     ("finished", N): (None, None),
     ("finished", P): (None, None),
     ("finished", U): (None, None),
     ("finished", S): (None, None),
+    ("finished", R): (None, None),
     ("paused", N): (None, None),
     ("paused", P): (C.RESUME, C.RESUME),
     ("paused", U): (None, None),
     ("paused", S): (C.STOP, C.STOP),
+    ("paused", R): (None, None),
     ("fault", N): (None, None),
     ("fault", P): (None, C.RESUME),  # only once the keyfob is back
     ("fault", U): (None, None),
     ("fault", S): (C.STOP, C.STOP),
+    ("fault", R): (None, None),
     ("stopped", N): (None, None),
     ("stopped", P): (None, None),
     ("stopped", U): (None, None),
     ("stopped", S): (None, None),
+    ("stopped", R): (None, None),
 }
 
 
@@ -83,12 +94,12 @@ def facts(stage: str, on: bool, plays_names: bool = True) -> Facts:
     conditions = Conditions(
         plays_names=plays_names, bags_taught=on, all_done=False, resume_step=resume_step
     )
-    return Facts(conditions, undo_available=on, hardware_ready=on)
+    return Facts(conditions, undo_available=on, hardware_ready=on, reopen_available=on)
 
 
 def test_the_table_covers_every_stage_and_command() -> None:
     assert set(TABLE) == set(itertools.product(STATES, Command))
-    assert len(TABLE) == 40
+    assert len(TABLE) == 50
 
 
 @pytest.mark.parametrize(("stage", "command"), sorted(TABLE), ids=lambda v: str(v))
@@ -112,8 +123,12 @@ def test_a_resume_goes_back_where_the_game_was() -> None:
 def test_each_confirmation_fires_a_trigger_of_the_table() -> None:
     triggers = {transition["trigger"] for transition in TRANSITIONS}
     assert set(TRIGGERS.values()) <= triggers
-    # An undo and closing a stopped session move no stage.
-    assert set(TRIGGERS) == set(Confirmation) - {Confirmation.UNDO, Confirmation.CLOSE}
+    # An undo, a re-open and closing a stopped session move no stage.
+    assert set(TRIGGERS) == set(Confirmation) - {
+        Confirmation.UNDO,
+        Confirmation.CLOSE,
+        Confirmation.REOPEN,
+    }
 
 
 def test_in_idle_a_stopped_session_waits_for_next_or_stop() -> None:

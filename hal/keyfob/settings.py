@@ -214,6 +214,8 @@ DEFAULT_RESEARCHER_KEYS = {
     "KEY_PAGEUP": "pause",
     "KEY_B": "undo",
     "KEY_ESC": "stop",
+    # A presenter's "start the slide show" key: re-open the name learned last.
+    "KEY_F5": "reopen",
 }
 # A researcher's hold on the children's keyfob: longer than any child's press.
 Hold = Annotated[float, msgspec.Meta(ge=2.0, le=10.0, extra={"unit": "s"})]
@@ -236,7 +238,7 @@ class ResearcherSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True
     device: DevicePath | None = None
     name: DeviceName | None = None
     grab: bool = True
-    # Key (evdev name or number) -> command: next, pause, undo, stop.
+    # Key (evdev name or number) -> command: next, pause, undo, stop, reopen.
     keys: dict[str, CommandName] = msgspec.field(
         default_factory=lambda: dict(DEFAULT_RESEARCHER_KEYS)
     )

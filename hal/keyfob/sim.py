@@ -272,12 +272,12 @@ TERMINAL_KEYS = {
     "l": "lost",
     "k": "back",
 }
-RESEARCHER_KEYS = {"G": "next", "R": "pause", "d": "undo", "b": "stop"}
+RESEARCHER_KEYS = {"G": "next", "R": "pause", "d": "undo", "b": "stop", "o": "reopen"}
 # A command given on the children's keyfob when the researcher has no device of their own.
 COMMAND_GESTURES = {"next": "long green", "pause": "long red", "undo": "double red", "stop": "both"}
 TERMINAL_HELP = (
     "children: g green, r red, D double green; researcher: G next, R pause, d undo, "
-    "b stop; keyfob: l lost, k back"
+    "b stop, o reopen (their device); keyfob: l lost, k back"
 )
 
 
@@ -293,8 +293,9 @@ class ResearcherKeys:
         """Give the researcher's command `name` ("next", "pause", "undo", "stop")."""
         if self.device is not None:
             await self.device.perform(f"command {name}")
-        else:
+        elif name in COMMAND_GESTURES:
             await self.keyfob.perform(COMMAND_GESTURES[name])
+        # else: a command with no gesture on the children's keyfob (reopen): nothing
 
 
 class TerminalKeyfob(SimKeyfob):

@@ -145,6 +145,12 @@ def register(subparsers: Any) -> None:
         help="withdraw a learned toy from later targets (default: the config's, else names)",
     )
     parser.add_argument(
+        "--recover",
+        action="store_true",
+        help="a researcher re-opens a wrongly learned name when Kaspar is confused "
+        "(kasparctl.game.recovery); the scalar simulator only",
+    )
+    parser.add_argument(
         "--config", default=None, help="kaspar.toml to take the game settings and profiles from"
     )
     parser.add_argument(
@@ -242,6 +248,7 @@ def _run(arguments: argparse.Namespace) -> int:
         "p_wrong_green": simple.p_wrong_green,
         "p_wrong_red": simple.p_wrong_red,
         "p_no_answer": simple.p_no_answer,
+        "recover": arguments.recover,
     }
     if isinstance(teacher, TeacherModel):
         context["teacher"] = arguments.teacher
@@ -256,7 +263,9 @@ def _run(arguments: argparse.Namespace) -> int:
         return _run_sweep(arguments, game, params, teacher, seed, context)
 
     with _progress(arguments.groups) as on_group:
-        stats = summarise_study(arguments.groups, game, params, teacher, seed, on_group)
+        stats = summarise_study(
+            arguments.groups, game, params, teacher, seed, on_group, recover=arguments.recover
+        )
     if arguments.json:
         print(json.dumps({**context, **msgspec.to_builtins(stats)}, allow_nan=False))
     else:
@@ -279,6 +288,8 @@ def _teacher(arguments: argparse.Namespace) -> Teacher | TeacherModel:
 
 def _check_size(arguments: argparse.Namespace, game: GameSettings) -> None:
     """Refuse work no run should take hours or gigabytes for, saying what to do instead."""
+    if arguments.recover and (arguments.power or arguments.sweep):
+        raise UsageError("--recover: only the scalar simulator plays it, not --power or --sweep")
     if arguments.power:
         if arguments.compare is None:
             raise UsageError("--power: expected --compare NAME=A,B (the two arms to compare)")

@@ -37,6 +37,13 @@ class GameEvent(enum.StrEnum):
     # problems: FaultSource -> detail, every part that is not working now (empty: all well);
     # sent whenever it changes (the daemon's STATUS= shows it)
     PROBLEMS = "problems"
+    # target (index), reason, learned ([(target, label)...], the one learned last at the
+    # end): Kaspar is confused and asks the researcher (kasparctl.game.recovery).
+    CONFUSED = "confused"
+    # target, name (indices): the researcher re-opened the name learned last.
+    REOPENED = "reopened"
+    # target, toy (names): the right toy of an open target is no longer offered.
+    ALERT = "alert"
 
 
 Listener = Callable[[GameEvent, dict[str, Any]], None]

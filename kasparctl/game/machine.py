@@ -54,6 +54,7 @@ from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import ANSWERS_ONLY, Gesture, GestureKind
 from hal.servos.api import Fault
 from kasparctl.config import Config, SessionPlan
+from kasparctl.game import recovery
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.presses import ChildPresses, Press
@@ -61,6 +62,7 @@ from kasparctl.game.records import (
     Button,
     CommandRecord,
     Confirmation,
+    ConfusedRecord,
     FaultRecord,
     FaultSource,
     HalEvent,
@@ -72,6 +74,7 @@ from kasparctl.game.records import (
     SessionEvent,
     SessionRecord,
     StepRecord,
+    TrialRecord,
     UndoRecord,
 )
 from kasparctl.game.researcher import (
@@ -180,6 +183,8 @@ def planned(config: Config, plan: SessionPlan, seed: int | None) -> dict[str, An
         "script_version": chosen.version,
         # What Kaspar spoke (sessions planned before languages were recorded spoke "en").
         "language": config.language,
+        # Confusion noticed, names re-opened (kasparctl.game.recovery); absent before.
+        "recovery": recovery.RECOVERY_VERSION,
         "plan": msgspec.to_builtins(plan),
         # Frozen at the start: a resume uses these, whatever the configuration says then.
         "learner": frozen_learner(plan.profile, config.profile(plan.profile)),
@@ -556,6 +561,9 @@ class Game:
             undo_available=state is not None and state.undo is not None,
             hardware_ready=self.hw.keyfob.connected,
             stopped_waiting=self.stopped_waiting is not None and self.session is None,
+            reopen_available=(
+                state is not None and recovery.reopen_record(state, self.settings) is not None
+            ),
         )
         key = confirmation(stage, command, facts)
         given = CommandRecord(
@@ -614,6 +622,9 @@ class Game:
     async def _fire(self, key: Confirmation) -> None:
         if key is Confirmation.UNDO:
             await self._undo()
+            return
+        if key is Confirmation.REOPEN:
+            await self._reopen()
             return
         if key is Confirmation.START and self.session is None:
             if self.stopped_waiting is not None:
@@ -1039,13 +1050,49 @@ class Game:
         heard = Answer(
             spoken, question_end, cast(Button, button), pressed_at, pressed_at < question_end
         )
-        scored = score_answer(plan, heard, state, params, self.settings, session_plan)
+        planned_with = "recovery" in self._require_session().plan
+        scored = score_answer(
+            plan, heard, state, params, self.settings, session_plan, recovery=planned_with
+        )
         record = self._change(scored)
         self.presses.answered(pressed_at, record.trial)
         self._emit(GameEvent.ANSWERED, trial=record.trial, feedback=button)
+        confused = self._notice(record)
         await self._react(plan, record.green, record.learned, listened)
         if state.progress[plan.target].given_up:
             await self.speech.say("react.given_up")
+        if confused is not None:
+            await self._say_confused(confused)
+
+    def _notice(self, record: TrialRecord) -> ConfusedRecord | None:
+        """What the answer showed the researcher should know (kasparctl.game.recovery):
+        a right toy no longer offered, and whether Kaspar is confused; recorded."""
+        state, key = self._require_state(), self._require_plan().answer_key
+        for alert in recovery.alerts(state, record, self.settings, key):
+            self._record(alert)
+            self._emit(GameEvent.ALERT, target=alert.target, toy=alert.toy)
+        confused = recovery.confusion(state, record, self.settings)
+        if confused is None:
+            return None
+        return self._change(confused)
+
+    async def _say_confused(self, confused: ConfusedRecord) -> None:
+        """Said once; the researcher is told (GameEvent.CONFUSED) once Kaspar has asked."""
+        if confused.reason == recovery.LEARNED_ELSEWHERE and isinstance(confused.name, str):
+            await self.speech.say("recovery.confused_learned", toy=confused.name)
+        else:
+            await self.speech.say("recovery.confused")
+        if confused.reopen_name is not None:
+            await self.speech.say("recovery.ask_researcher")
+        state = self._require_state()
+        learned = [(t, state.progress[t].learned) for t in state.learned_targets()]
+        self._emit(
+            GameEvent.CONFUSED,
+            target=confused.target_index,
+            reason=confused.reason,
+            learned=learned,
+            reopen=confused.reopen_name,
+        )
 
     async def _ask(self, plan: TrialPlan) -> tuple[str, ...]:
         """Point while saying how sure (if the plan says it), then the guess; the lines said.
@@ -1086,9 +1133,23 @@ class Game:
         state = self._require_state()
         if state.undo is None:
             return False
+        back = recovery.taken_back(state, self.settings)  # the last was a re-open
         await self._cancel_step()
-        self._change(UndoRecord(trial=state.undo.trial))
+        self._change(back if back is not None else UndoRecord(trial=state.undo.trial))
         self.presses.forget_answer()
+        self._start_step("guessing")
+        return True
+
+    async def _reopen(self) -> bool:
+        """The name learned last is learned no more; Kaspar says so and asks on."""
+        state = self._require_state()
+        record = recovery.reopen_record(state, self.settings)
+        if record is None:
+            return False
+        await self._cancel_step()
+        self._change(record)
+        self._emit(GameEvent.REOPENED, target=record.target_index, name=record.name_index)
+        await self.speech.announce("confirm.reopen", toy=record.name)
         self._start_step("guessing")
         return True
 

@@ -149,6 +149,12 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
         "confirm.undo": _spec(about="the researcher took the last answer back"),
         "confirm.stop": _spec(sentences=3, about="the researcher stopped: thanks, goodbye"),
         "confirm.close": _spec(about="a stopped session closed for good (no children)"),
+        "confirm.reopen": _spec("toy", about="the researcher re-opened the name learned last"),
+        "recovery.confused": _spec(about="every name left was answered red for this bag"),
+        "recovery.confused_learned": _spec(
+            "toy", about="a name learned for another bag was answered green here"
+        ),
+        "recovery.ask_researcher": _spec(about="after confused: a grown-up may re-open a name"),
         "fault.servo": _spec(about="a joint failed (the joint goes to the records)"),
         "fault.keyfob_lost": _spec(about="the children's keyfob is gone"),
         "fault.keyfob_back": _spec(about="the children's keyfob is back"),

@@ -77,6 +77,8 @@ class Confirmation(enum.StrEnum):
     STOP = "stop"
     # A stop given in idle while a stopped session waits: it is closed for good.
     CLOSE = "close"
+    # The name learned last is learned no more (kasparctl.game.recovery).
+    REOPEN = "reopen"
 
 
 Button = Literal["green", "red"]
@@ -265,11 +267,67 @@ class TrialRecord(Record, tag="trial", kw_only=True, frozen=True):
     # Pressed in the question's last words (before question_end, so the reaction time
     # is negative) and taken as the answer; absent otherwise.
     in_question: bool | UnsetType = UNSET
+    # Sessions planned with recovery (kasparctl.game.recovery): the labels (indices)
+    # whose last answer on this target is red, after this answer. Absent before.
+    rejected: list[int] | UnsetType = UNSET
 
     @property
     def green(self) -> bool:
         """Whether the children said yes."""
         return self.feedback == "green"
+
+
+class ConfusedRecord(Record, tag="confused", kw_only=True, frozen=True):
+    """Kaspar is confused about `target` after trial `trial`, says so and asks the researcher.
+
+    `reason` "all_rejected": every name still offered was answered red on this
+    target; "learned_elsewhere": `name`, learned for another target (`learned_for`),
+    was answered green here. `reopen_target` and `reopen_name` are what the
+    researcher's re-open would re-open (the name learned last), None if nothing is
+    learned. Changes the state: Kaspar says it once per target until a re-open.
+    """
+
+    trial: int
+    target: str
+    target_index: int
+    reason: str
+    rejected: list[str]
+    reopen_target: str | None
+    reopen_name: str | None
+    name: str | UnsetType = UNSET
+    learned_for: str | UnsetType = UNSET
+
+
+class ReopenRecord(Record, tag="reopen", kw_only=True, frozen=True):
+    """The researcher re-opened `name`, learned last, for `target`: it is learned no more,
+    offered again, and the target is asked again once the current one is done.
+
+    `trial` is the number of trials recorded before it. `taken_back` when the
+    researcher's undo took that re-open back (the name is learned again).
+    """
+
+    trial: int
+    target: str
+    target_index: int
+    name: str
+    name_index: int
+    taken_back: bool | UnsetType = UNSET
+
+
+class AlertRecord(Record, tag="alert", kw_only=True, frozen=True):
+    """Something the researcher should know, found with the plan's answer key.
+
+    `alert` "right_toy_withdrawn": after trial `trial`, `toy`, the right toy of the
+    open target `target` (per the answer key), is no longer offered, because it
+    was learned for `learned_for`. History only: the learner never sees the key.
+    """
+
+    alert: str
+    trial: int
+    target: str
+    target_index: int
+    toy: str
+    learned_for: str
 
 
 AnyRecord = (
@@ -284,7 +342,18 @@ AnyRecord = (
     | UndoRecord
     | QuestionRecord
     | TrialRecord
+    | ConfusedRecord
+    | ReopenRecord
+    | AlertRecord
 )
 
 # Records that change GameState when applied; every other kind is history only.
-STATE_CHANGING = (StepRecord, PoseRecord, TrialRecord, UndoRecord, CommandRecord)
+STATE_CHANGING = (
+    StepRecord,
+    PoseRecord,
+    TrialRecord,
+    UndoRecord,
+    CommandRecord,
+    ConfusedRecord,
+    ReopenRecord,
+)

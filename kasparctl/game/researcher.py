@@ -5,7 +5,8 @@ Which command applies where comes from the machine's own table
 (kasparctl.game.stages) through `may`: a command applies where the trigger it
 fires would move the machine. Only what the table cannot know is added here:
 the researcher's "next" never skips a step that ends by itself, undo needs an
-answer to take back, a resume from a fault needs the keyfob back, and in idle
+answer to take back, a re-open needs a learned name and a target still open
+(kasparctl.game.recovery), a resume from a fault needs the keyfob back, and in idle
 a stopped session waiting for the researcher's choice is reopened by "next"
 and closed by "stop".
 
@@ -38,7 +39,8 @@ TRIGGERS: Mapping[Confirmation, str] = {
 # Kaspar confirms these before what they start; the others after what they stop. A
 # start has no confirmation of its own: the greeting that begins the session is it.
 SPOKEN_FIRST = frozenset({Confirmation.NEXT_STEP, Confirmation.RESUME})
-SILENT = frozenset({Confirmation.START})
+# A re-open is confirmed by the game itself, naming the name it re-opens.
+SILENT = frozenset({Confirmation.START, Confirmation.REOPEN})
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,6 +52,8 @@ class Facts:
     hardware_ready: bool  # the keyfob is connected: a resume from a fault can be heard
     # A stopped session waits in idle for the researcher: reopen it or close it.
     stopped_waiting: bool = False
+    # A learned name can be re-opened: one is learned, and a target is still open.
+    reopen_available: bool = False
 
 
 def confirmation(stage: str, command: Command, facts: Facts) -> Confirmation | None:
@@ -67,6 +71,8 @@ def confirmation(stage: str, command: Command, facts: Facts) -> Confirmation | N
         return None
     if command is Command.UNDO:
         return Confirmation.UNDO if stage == "guessing" and facts.undo_available else None
+    if command is Command.REOPEN:
+        return Confirmation.REOPEN if stage == "guessing" and facts.reopen_available else None
     if may("start", stage, conditions):
         return Confirmation.START
     if stage in RESEARCHER_MOVES_ON and may("advance", stage, conditions):

@@ -5,8 +5,8 @@ resumed session applies the records written after its last snapshot with the
 very same function. So the live path and the resume path cannot disagree, and
 the snapshot is only a cache of what the records already say.
 
-Records that change the state: step, pose, trial, undo, and a command that
-paused or resumed (kasparctl.game.records.STATE_CHANGING). Every other kind
+Records that change the state: step, pose, trial, undo, confused, reopen, and
+a command that paused or resumed (kasparctl.game.records.STATE_CHANGING). Every other kind
 (presses, prompts, faults, HAL events) is history only. The snapshot is this
 struct as JSON, encoded and decoded by kasparctl.game.session.
 """
@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import statistics
+from typing import Any
 
 import msgspec
 import numpy as np
@@ -27,8 +28,10 @@ from kasparctl.game.records import (
     AnyRecord,
     CommandRecord,
     Confirmation,
+    ConfusedRecord,
     PoseRecord,
     Record,
+    ReopenRecord,
     StepRecord,
     TrialRecord,
     UndoRecord,
@@ -54,6 +57,14 @@ class UndoEntry(msgspec.Struct, frozen=True):
     turn: int
     target: int
     previous: tuple[int, bool] | None
+    # Fields added later are UNSET unless the state had them (older snapshots read and
+    # save unchanged). A re-open rather than an answer: the target re-opened, whose
+    # `progress` is above (kasparctl.game.recovery).
+    reopened: int | UnsetType = UNSET
+    learned_order: list[int] | UnsetType = UNSET
+    confused: int | UnsetType | None = UNSET
+    # The labels rejected on `target` before the answer.
+    rejected: list[int] | UnsetType = UNSET
 
 
 class GameState(msgspec.Struct, eq=False):
@@ -82,6 +93,13 @@ class GameState(msgspec.Struct, eq=False):
     shown_poses: dict[str, list[dict[str, float]]] | UnsetType = UNSET
     # The step a stopped session was stopped in: where it carries on if reopened.
     stopped_from: str | UnsetType = UNSET
+    # Recovery (kasparctl.game.recovery), set by the records of sessions planned with it:
+    # per target, the labels whose last answer there is red;
+    rejected: list[list[int]] | UnsetType = UNSET
+    # the targets learned, in the order they were learned (a re-open takes the last);
+    learned_order: list[int] | UnsetType = UNSET
+    # the target Kaspar said it is confused about, until it is done or a name re-opened.
+    confused: int | UnsetType | None = UNSET
 
     @classmethod
     def new(cls, settings: GameSettings, params: LearnerParams, seed: int | None) -> GameState:
@@ -113,6 +131,12 @@ class GameState(msgspec.Struct, eq=False):
         """The first target neither learned nor given up, if any."""
         return next((i for i, progress in enumerate(self.progress) if not progress.done), None)
 
+    def learned_targets(self) -> list[int]:
+        """The learned targets, the one learned last at the end (index order before recovery)."""
+        if self.learned_order is not UNSET:
+            return list(self.learned_order)
+        return [i for i, progress in enumerate(self.progress) if progress.learned is not None]
+
     def bags_taught(self, settings: GameSettings) -> bool:
         """Whether every target has a taught pose (step 2 can end)."""
         return all(target in self.poses for target in settings.targets)
@@ -129,6 +153,14 @@ class GameState(msgspec.Struct, eq=False):
             self._apply_trial(record, settings)
         elif isinstance(record, UndoRecord):
             self._apply_undo(record)
+        elif isinstance(record, ConfusedRecord):
+            done = self.progress[record.target_index].done
+            self.confused = None if done else record.target_index
+        elif isinstance(record, ReopenRecord):
+            if record.taken_back is True:
+                self._apply_reopen_taken_back(record)
+            else:
+                self._apply_reopen(record)
         elif (
             isinstance(record, CommandRecord) and record.applied and record.command is Command.PAUSE
         ):
@@ -176,6 +208,8 @@ class GameState(msgspec.Struct, eq=False):
             turn=self.turn,
             target=self.target,
             previous=self.previous,
+            # Planned with recovery: what the answer may change, as it was.
+            **(_recovery_before(self, target) if record.rejected is not UNSET else {}),
         )
         self.learner.table[target] = np.array(record.q_after, dtype=np.float64)
         # The generator as it was after this guess's draw, so a resume draws on from there.
@@ -185,6 +219,16 @@ class GameState(msgspec.Struct, eq=False):
         progress = self.progress[target]
         learned_now = progress.record(choice, record.green)
         self.previous = (choice, record.green)
+        if record.rejected is not UNSET:
+            # Planned with recovery: what was rejected here, and the order names are learned.
+            if self.rejected is UNSET:
+                self.rejected = [[] for _ in self.progress]
+            self.rejected[target] = list(record.rejected)
+            if learned_now:
+                order = [i for i in self.learned_targets() if i != target]
+                self.learned_order = [*order, target]
+        if progress.done and self.confused == target:
+            self.confused = None
         if progress.done:
             if learned_now and settings.exclude_learned:
                 self.offered[choice] = False
@@ -194,7 +238,7 @@ class GameState(msgspec.Struct, eq=False):
 
     def _apply_undo(self, record: UndoRecord) -> None:
         undo = self.undo
-        if undo is None or undo.trial != record.trial:
+        if undo is None or undo.trial != record.trial or undo.reopened is not UNSET:
             raise StateError(f"undo of trial {record.trial}: it is not the last answer")
         self.learner.table[undo.target] = np.array(undo.q_row, dtype=np.float64)
         self.progress[undo.target] = dataclasses.replace(undo.progress)
@@ -202,7 +246,60 @@ class GameState(msgspec.Struct, eq=False):
         self.turn = undo.turn
         self.target = undo.target
         self.previous = undo.previous
+        if undo.rejected is not UNSET and self.rejected is not UNSET:
+            self.rejected[undo.target] = list(undo.rejected)
+        if undo.learned_order is not UNSET:
+            self.learned_order = list(undo.learned_order)
+        if undo.confused is not UNSET:
+            self.confused = undo.confused
         self.undo = None
+
+    def _apply_reopen(self, record: ReopenRecord) -> None:
+        """The name learned last is learned no more: offered again, its target open again."""
+        learned = self.learned_targets()
+        target, label = record.target_index, record.name_index
+        if not learned or learned[-1] != target or self.progress[target].learned != label:
+            raise StateError(
+                f"re-open of target {target} ({record.name}): it is not the one learned last"
+            )
+        self.undo = UndoEntry(
+            trial=record.trial,
+            q_row=self.learner.table[self.target].tolist(),
+            progress=dataclasses.replace(self.progress[target]),
+            offered=list(self.offered),
+            turn=self.turn,
+            target=self.target,
+            previous=self.previous,
+            reopened=target,
+            learned_order=learned,
+            confused=self.confused,
+        )
+        progress = self.progress[target]
+        progress.learned, progress.streak, progress.streak_label = None, 0, None
+        self.offered[label] = True
+        self.learned_order = learned[:-1]
+        self.confused = None
+
+    def _apply_reopen_taken_back(self, record: ReopenRecord) -> None:
+        undo = self.undo
+        if undo is None or undo.reopened != record.target_index:
+            raise StateError(f"undo of the re-open of target {record.target_index}: not the last")
+        self.progress[record.target_index] = dataclasses.replace(undo.progress)
+        self.offered = list(undo.offered)
+        if undo.learned_order is not UNSET:
+            self.learned_order = list(undo.learned_order)
+        if undo.confused is not UNSET:
+            self.confused = undo.confused
+        self.undo = None
+
+
+def _recovery_before(state: GameState, target: int) -> dict[str, Any]:
+    """What a recovery-era answer may change besides the rest: for its undo entry."""
+    return {
+        "learned_order": state.learned_targets(),
+        "confused": None if state.confused is UNSET else state.confused,
+        "rejected": [] if state.rejected is UNSET else list(state.rejected[target]),
+    }
 
 
 def median_pose(shown: list[dict[str, float]]) -> dict[str, float]:

@@ -24,6 +24,7 @@ from msgspec import UNSET
 from kasparctl.config import GameSettings, SessionPlan
 from kasparctl.game.phrases import PhraseBook
 from kasparctl.game.records import Button, QuestionRecord, TrialRecord
+from kasparctl.game.recovery import rejected_after
 from kasparctl.game.scripts import Script
 from kasparctl.game.state import GameState
 from kasparctl.learning.learner import (
@@ -146,8 +147,13 @@ def score_answer(
     params: LearnerParams,
     settings: GameSettings,
     session_plan: SessionPlan,
+    *,
+    recovery: bool = False,
 ) -> TrialRecord:
     """The trial record of `plan` answered with `answer`, for the session at `state`.
+
+    `recovery` (a session planned with it, kasparctl.game.recovery): the record also
+    says which labels stand rejected on this target after the answer.
 
     The learner's reward and Q after (Eq. 1, towards the next open target once
     this one is done), the paper's perseverative and win-shift flags, and, where
@@ -193,7 +199,13 @@ def score_answer(
         feedback_right=None if correct is None else correct == green,
         learned=progress_after.learned is not None,
         in_question=True if answer.in_question else UNSET,
+        rejected=_rejected(state, target, choice, green) if recovery else UNSET,
     )
+
+
+def _rejected(state: GameState, target: int, choice: int, green: bool) -> list[int]:
+    before = [] if state.rejected is UNSET else state.rejected[target]
+    return rejected_after(before, choice, green)
 
 
 def next_open_target(state: GameState, current: int) -> int | None:

@@ -69,6 +69,8 @@ class ProblemRecord(msgspec.Struct, frozen=True):
     entropy_after: float
     # Labels offered at its first guess (fewer than all in the names game's later bags).
     candidates: int = 0
+    # Times the researcher re-opened its learned name (kasparctl.game.recovery).
+    reopened: int = 0
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,7 +19,7 @@ import re
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any, TextIO
 
-from kasparctl.game.records import TrialRecord
+from kasparctl.game.records import ConfusedRecord, ReopenRecord, TrialRecord
 from kasparctl.game.session import record_to_plain
 from kasparctl.research.anonymise import NO_PSEUDONYMS, Pseudonyms
 from kasparctl.research.catalogue import SessionData
@@ -123,6 +123,9 @@ def trial_header(toys: dict[str, str], participants: Participants = NO_PARTICIPA
         "feedback_right",
         "learned",
         "undone",
+        "right_toy_offered",
+        "confused",
+        "reopened",
         "time",
     ]
 
@@ -137,8 +140,10 @@ def trial_rows(
     names = Pseudonyms(session.first_names()) if anonymise else NO_PSEUDONYMS
     answer_key = session.answer_key
     identity = session.identity
+    recovery = _Recovery()
     for walked in walk(session):
         trial = walked.record
+        recovery.see(trial)
         if not isinstance(trial, TrialRecord):
             continue
         target_index, child_index = trial.target_index, trial.child_index
@@ -174,12 +179,42 @@ def trial_rows(
             "feedback_right": trial.feedback_right,
             "learned": trial.learned,
             "undone": walked.undone,
+            "right_toy_offered": (
+                answer_key[target_index] in trial.candidates
+                if 0 <= target_index < len(answer_key)
+                else None
+            ),
+            "confused": recovery.confused == target_index,
+            "reopened": recovery.reopened.get(target_index, 0) > 0,
             "time": trial.time,
         }
+        recovery.after(trial)
         for prefix, values in _per_toy(trial):
             for toy, value in zip(session.toys, values, strict=False):
                 row[prefix + toys[toy]] = value
         yield row
+
+
+class _Recovery:
+    """Which targets Kaspar is confused about, and which were re-opened, record by record
+    (kasparctl.game.recovery): a trial asked while confused, or on a re-opened target."""
+
+    def __init__(self) -> None:
+        self.confused: int | None = None
+        self.reopened: dict[int, int] = {}
+
+    def see(self, record: object) -> None:
+        if isinstance(record, ConfusedRecord):
+            self.confused = record.target_index
+        elif isinstance(record, ReopenRecord):
+            change = -1 if record.taken_back is True else 1
+            self.reopened[record.target_index] = self.reopened.get(record.target_index, 0) + change
+            if change > 0:
+                self.confused = None
+
+    def after(self, trial: TrialRecord) -> None:
+        if trial.learned and self.confused == trial.target_index:
+            self.confused = None
 
 
 def _per_toy(trial: TrialRecord) -> tuple[tuple[str, list[float]], ...]:
@@ -215,6 +250,9 @@ _EVENT_NAME = {
     "prompt": "line",
     "session": "event",
     "step": "to",
+    "confused": "reason",
+    "reopen": "name",
+    "alert": "alert",
 }
 
 

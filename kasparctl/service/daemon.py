@@ -74,7 +74,7 @@ from kasparctl.game.state import GameState
 from kasparctl.log import configure_logging
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
 from kasparctl.service.sdnotify import Notifier, watchdog_interval
-from kasparctl.service.status import STATUS_WORDS, status_line
+from kasparctl.service.status import STATUS_WORDS, recovery_words, status_line
 
 log = structlog.get_logger("kasparctl.service.daemon")
 
@@ -87,6 +87,16 @@ GAME_CANCEL_GRACE_S = 1.0
 # Records the disk refused, each with where it goes and its clock: carried from game to game.
 Unwritten = list[tuple[Session | EventLog, Record, float]]
 DEBUG_BLOCK_ENV = "KASPAR_DEBUG_LOOP_BLOCK_S"
+# The game events after which STATUS= is written again: the stage, the problems, a new
+# session, and Kaspar confused until a name is re-opened or the target learned.
+_STATUS_EVENTS = (
+    GameEvent.STATE,
+    GameEvent.PROBLEMS,
+    GameEvent.SESSION,
+    GameEvent.CONFUSED,
+    GameEvent.REOPENED,
+    GameEvent.ANSWERED,
+)
 
 
 @dataclass
@@ -378,11 +388,13 @@ class Daemon:
             self._unwritten.pop(0)
 
     def _status(self, game: Game) -> str:
-        return status_line(game.stage, game.problems, self._notice)
+        """STATUS=: the stage, Kaspar confused (and what reopen would do), the problems."""
+        confused = recovery_words(game.session_state, game.settings)
+        return status_line(game.stage, game.problems, self._notice, confused)
 
     def _on_game_event(self, event: GameEvent, info: dict[str, Any]) -> None:
         game = self.game
-        if game is None or event not in (GameEvent.STATE, GameEvent.PROBLEMS, GameEvent.SESSION):
+        if game is None or event not in _STATUS_EVENTS:
             return
         if event is GameEvent.SESSION:
             self._notice = None  # the next session has begun: the abandoned one is old news

@@ -11,7 +11,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from kasparctl.config import GameSettings
 from kasparctl.game.records import FaultSource
+from kasparctl.game.recovery import reopen_record
+from kasparctl.game.state import GameState
 
 STATUS_WORDS = {
     "idle": "waiting: long green starts the session",
@@ -44,11 +47,16 @@ STATUS_LIMIT = 600
 
 
 def status_line(
-    stage: str, problems: Mapping[FaultSource, str] | None = None, notice: str | None = None
+    stage: str,
+    problems: Mapping[FaultSource, str] | None = None,
+    notice: str | None = None,
+    confused: str | None = None,
 ) -> str:
     """The STATUS= text for `stage` with `problems` (part -> why), each reason cut to a limit,
-    and a `notice` (a session abandoned) last."""
+    and a `notice` (a session abandoned) last; `confused` (recovery_words) after the stage."""
     words = STATUS_WORDS.get(stage, stage)
+    if confused:
+        words = f"{words} | {confused}"
     parts = [
         f"{PROBLEM_WORDS[kind]}: {_cut(detail, DETAIL_LIMIT)}"
         + (STORAGE_ADVICE if kind is FaultSource.STORAGE else "")
@@ -57,6 +65,18 @@ def status_line(
     if notice:
         parts.append(_cut(notice, DETAIL_LIMIT))
     return _cut(" | ".join([words, *parts]), STATUS_LIMIT)
+
+
+def recovery_words(state: GameState | None, settings: GameSettings) -> str | None:
+    """Kaspar is confused and asks the researcher (kasparctl.game.recovery): which target,
+    and what their reopen would re-open; None when it is not confused."""
+    if state is None or not isinstance(state.confused, int):
+        return None
+    target = settings.targets[state.confused]
+    reopen = reopen_record(state, settings)
+    if reopen is None:
+        return f"Kaspar is confused about {target}"
+    return f"Kaspar is confused about {target}: reopen re-opens {reopen.name} ({reopen.target})"
 
 
 def _cut(text: str, limit: int) -> str:

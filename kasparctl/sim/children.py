@@ -25,10 +25,11 @@ from hal.keyfob.sim import CHORD_LAG, PRESS_GAP, PRESS_HOLD, SimKeyfob
 from hal.servos.settings import ServoSettings
 from kasparctl.game.events import GameEvent
 from kasparctl.game.records import FaultSource
+from kasparctl.game.recovery import to_reopen
 from kasparctl.sim.teacher import Messiness, Teacher
 
 Say = Callable[[str], None]
-# The researcher's command ("next", "pause", "undo", "stop"), given however they give them.
+# The researcher's command ("next", "pause", "undo", "stop", "reopen"), however they give them.
 Command = Callable[[str], Awaitable[None]]
 MAX_RESUMES = 3
 # Where a child shows a bag is where the bag is, give or take this much (degrees).
@@ -112,6 +113,9 @@ class SimulatedGroup:
         self._tasks: set[asyncio.Task[None]] = set()
         self._silent_question: tuple[int, int, int] | None = None
         self._answered: set[int] = set()
+        # The question being asked (trial, target, choice): one abandoned (a re-open or an
+        # undo asks anew, under the same number) is answered no more.
+        self._asking: tuple[int, int, int] | None = None
         self._room = room if room is not None else rng
         self._bag_poses: dict[int, dict[str, float]] = {}
         self._faults = 0
@@ -125,6 +129,10 @@ class SimulatedGroup:
         if event is GameEvent.WAITING_FOR_RESEARCHER:
             self._spawn(self._researcher_next())
         elif event is GameEvent.ASKING:
+            if "trial" in info:
+                self._asking = (int(info["trial"]), int(info["target"]), int(info["choice"]))
+                if self._silent_question != self._asking:
+                    self._silent_question = None
             self._spawn(self._eager(info))
         elif event is GameEvent.QUESTION:
             self._spawn(self._answer(int(info["trial"]), int(info["target"]), int(info["choice"])))
@@ -136,6 +144,8 @@ class SimulatedGroup:
             self._spawn(self._answer(trial, target, choice, honest_now=True))
         elif event is GameEvent.TEACH:
             self._spawn(self._teach(int(info["bag"])))
+        elif event is GameEvent.CONFUSED:
+            self._spawn(self._researcher_reopens(info["learned"]))
         elif _calls_researcher(event, info) and not self._resuming:
             # One researcher at a time: a fault can be announced twice.
             self._resuming = True
@@ -190,6 +200,15 @@ class SimulatedGroup:
         finally:
             self._resuming = False
 
+    async def _researcher_reopens(self, learned: list[tuple[int, int]]) -> None:
+        """Kaspar is confused and asks: the researcher, who knows what is in each bag,
+        re-opens the names learned last down to the one learned wrong (none if all are
+        right), one command at a time."""
+        for _ in range(to_reopen(learned, self.answers)):
+            await asyncio.sleep(self.researcher_s)
+            self.narrate("the researcher gives REOPEN")
+            await self.command("reopen")
+
     def _reply(self, target: int, choice: int, honest_now: bool) -> bool | None:
         correct = choice == self.answers[target]
         return correct if honest_now else self.teacher.answer(correct, self.rng)
@@ -206,7 +225,7 @@ class SimulatedGroup:
         meant = "green" if choice == self.answers[target] else "red"
         action = self.messiness.action(meant, self.rng)
         async with self._keyfob_free:
-            if trial not in self._answered:
+            if trial not in self._answered and self._asking == (trial, target, choice):
                 await self._press(action, "an eager child", trial=trial, button=meant, early=True)
 
     async def _answer(self, trial: int, target: int, choice: int, honest_now: bool = False) -> None:
@@ -219,7 +238,8 @@ class SimulatedGroup:
         button = "green" if reply else "red"
         action = self.messiness.action(button, self.rng)
         async with self._keyfob_free:
-            if trial not in self._answered:  # an eager press may have answered it
+            # An eager press may have answered it, or it was abandoned and asked anew.
+            if trial not in self._answered and self._asking == (trial, target, choice):
                 await self._press(action, "a child", trial=trial, button=button)
 
     async def _teach(self, bag: int) -> None:

@@ -389,7 +389,9 @@ async def researcher_command(
         await keyfob.perform(f"command {name}")  # a command key of the children's keypad
         return
     gestures = {command: gesture for gesture, command in config.game.commands.items()}
-    gesture = gestures.get(name, COMMAND_GESTURES[name])
+    gesture = gestures.get(name, COMMAND_GESTURES.get(name))
+    if gesture is None:
+        return  # no gesture means it on the children's keyfob (a re-open, by default)
     # Held a little past the researcher's hold, as the keyfob's "long" actions are.
     hold = config.researcher.hold_s + 0.3
     if gesture == "both":

@@ -25,7 +25,9 @@ import numpy as np
 
 from kasparctl.config import GameSettings
 from kasparctl.game.problem import TargetProgress
+from kasparctl.game.recovery import all_rejected, rejected_after, to_reopen
 from kasparctl.learning.learner import (
+    BoolArray,
     LearnerParams,
     choose,
     entropy_bits,
@@ -88,10 +90,16 @@ def simulate_group(
     rng: np.random.Generator,
     group: int = 0,
     answers: Sequence[int] | None = None,
+    *,
+    recover: bool = False,
 ) -> list[ProblemRecord]:
     """One group's game: every target in order, each until learned or given up.
 
     With a TeacherModel the children answer in turn, each with their own rates.
+    `recover`: the game of kasparctl.game.recovery, with a researcher who knows the
+    bags: when Kaspar is confused they re-open the names learned last down to the one
+    learned wrong (none if all are right), and a re-opened target is asked again
+    after the current one. Without it the random stream is the one it always was.
     """
     n_targets, n_toys = len(game.targets), len(game.toys)
     if answers is None:
@@ -103,12 +111,21 @@ def simulate_group(
     table = new_table(n_targets, n_toys, params)
     offered = np.ones(n_toys, dtype=bool)
     turn = 0
-    records: list[ProblemRecord] = []
-    for target in range(n_targets):
-        # The candidates change only between targets, when a name is learned.
+    progresses = [
+        TargetProgress(game.correct_answers_to_learn, game.max_trials_per_target)
+        for _ in range(n_targets)
+    ]
+    trials: list[list[TrialRecord]] = [[] for _ in range(n_targets)]
+    first_offered: list[int] = [0] * n_targets
+    last_candidates: list[BoolArray] = [offered.copy() for _ in range(n_targets)]
+    doubt = _Doubt(n_targets)
+    target: int | None = 0
+    while target is not None:
+        progress = progresses[target]
+        # The candidates change only between targets (and when a name is re-opened).
         candidates = offered.copy()
-        progress = TargetProgress(game.correct_answers_to_learn, game.max_trials_per_target)
-        trials: list[TrialRecord] = []
+        if not trials[target]:
+            first_offered[target] = int(candidates.sum())
         while not progress.done:
             probabilities = softmax(table[target], params.beta, candidates)
             entropy = entropy_bits(probabilities)
@@ -122,30 +139,107 @@ def simulate_group(
             turn += 1
             progress.record(choice, feedback)
             if feedback is not None:
-                table = update(
-                    table,
-                    target,
-                    choice,
-                    params.reward(feedback),
-                    params,
-                    _next_state(target, progress.done, n_targets),
+                next_state = (
+                    _next_open(progresses, target)
+                    if recover and progress.done
+                    else _next_state(target, progress.done, n_targets)
                 )
-            trials.append(TrialRecord(choice, feedback, entropy, correct))
-        if progress.learned is not None and game.exclude_learned:
-            offered[progress.learned] = False
-        records.append(
-            ProblemRecord(
-                group=group,
-                target=target,
-                answer=int(answers[target]),
-                trials=tuple(trials),
-                learned=progress.learned,
-                final_q=tuple(float(q) for q in table[target]),
-                entropy_after=entropy_bits(softmax(table[target], params.beta, candidates)),
-                candidates=int(candidates.sum()),
-            )
+                table = update(table, target, choice, params.reward(feedback), params, next_state)
+            trials[target].append(TrialRecord(choice, feedback, entropy, correct))
+            confused = recover and doubt.answered(target, choice, feedback, progresses, offered)
+            # The game takes no re-open once every target is done: the guessing is over.
+            open_left = not all(p.done for p in progresses)
+            if confused and open_left and doubt.reopen(progresses, offered, answers):
+                candidates = offered.copy()
+        last_candidates[target] = candidates
+        if progress.learned is not None:
+            doubt.learned(target)
+            if game.exclude_learned:
+                offered[progress.learned] = False
+        target = _next_open(progresses, target) if recover else _after(target, n_targets)
+    return [
+        ProblemRecord(
+            group=group,
+            target=index,
+            answer=int(answers[index]),
+            trials=tuple(trials[index]),
+            learned=progresses[index].learned,
+            final_q=tuple(float(q) for q in table[index]),
+            entropy_after=entropy_bits(softmax(table[index], params.beta, last_candidates[index])),
+            candidates=first_offered[index],
+            reopened=doubt.reopened[index],
         )
-    return records
+        for index in range(n_targets)
+    ]
+
+
+class _Doubt:
+    """The recovery rules of kasparctl.game.recovery, as the simulated game keeps them."""
+
+    def __init__(self, n_targets: int) -> None:
+        self.rejected: list[list[int]] = [[] for _ in range(n_targets)]
+        self.order: list[int] = []
+        self.confused: int | None = None
+        self.reopened = [0] * n_targets
+
+    def answered(
+        self,
+        target: int,
+        choice: int,
+        feedback: bool | None,
+        progresses: Sequence[TargetProgress],
+        offered: BoolArray,
+    ) -> bool:
+        """Count the answer; whether Kaspar is newly confused about `target`."""
+        if feedback is not None:
+            self.rejected[target] = rejected_after(self.rejected[target], choice, feedback)
+        if progresses[target].done and self.confused == target:
+            self.confused = None
+        if self.confused == target:
+            return False
+        elsewhere = feedback is True and any(
+            i != target and p.learned == choice for i, p in enumerate(progresses)
+        )
+        stuck = not progresses[target].done and all_rejected(
+            offered.tolist(), self.rejected[target]
+        )
+        if elsewhere or stuck:
+            self.confused = None if progresses[target].done else target
+            return True
+        return False
+
+    def learned(self, target: int) -> None:
+        self.order.append(target)
+
+    def reopen(
+        self, progresses: list[TargetProgress], offered: BoolArray, answers: Sequence[int]
+    ) -> bool:
+        """The researcher's re-opens; whether they gave any."""
+        learned = [(t, progresses[t].learned) for t in self.order]
+        count = to_reopen([(t, label) for t, label in learned if label is not None], answers)
+        for _ in range(count):
+            target = self.order.pop()
+            label = progresses[target].learned
+            assert label is not None
+            progress = progresses[target]
+            progress.learned, progress.streak, progress.streak_label = None, 0, None
+            offered[label] = True
+            self.reopened[target] += 1
+        if count:
+            self.confused = None
+        return count > 0
+
+
+def _after(target: int, n_targets: int) -> int | None:
+    return target + 1 if target + 1 < n_targets else None
+
+
+def _next_open(progresses: Sequence[TargetProgress], current: int) -> int | None:
+    """The next target asked: the first not done (a re-opened one comes back)."""
+    return next(
+        (i for i, p in enumerate(progresses) if i != current and not p.done),
+        None if progresses[current].done else current,
+    )
 
 
 def _next_state(target: int, done: bool, n_targets: int) -> int | None:
@@ -165,11 +259,13 @@ def simulate_study(
     teacher: Teacher | TeacherModel,
     seed: int | None,
     on_group: Callable[[int], None] | None = None,
+    *,
+    recover: bool = False,
 ) -> list[ProblemRecord]:
     """`groups` groups playing `game`; `on_group(g)` after each, for a progress bar."""
     return [
         record
-        for records in iter_groups(groups, game, params, teacher, seed, on_group)
+        for records in iter_groups(groups, game, params, teacher, seed, on_group, recover=recover)
         for record in records
     ]
 
@@ -181,6 +277,8 @@ def iter_groups(
     teacher: Teacher | TeacherModel,
     seed: int | None,
     on_group: Callable[[int], None] | None = None,
+    *,
+    recover: bool = False,
 ) -> Iterator[list[ProblemRecord]]:
     """Each group's problems in turn, as simulate_study plays them, never held together."""
     if groups < 1:
@@ -192,7 +290,8 @@ def iter_groups(
     for start in range(0, groups, block):
         for offset, stream in enumerate(root.spawn(min(block, groups - start))):
             group = start + offset
-            yield simulate_group(game, params, teacher, np.random.default_rng(stream), group)
+            rng = np.random.default_rng(stream)
+            yield simulate_group(game, params, teacher, rng, group, recover=recover)
             if on_group is not None:
                 on_group(group)
 
@@ -204,11 +303,13 @@ def summarise_study(
     teacher: Teacher | TeacherModel,
     seed: int | None,
     on_group: Callable[[int], None] | None = None,
+    *,
+    recover: bool = False,
 ) -> StudyStats:
     """The statistics of simulate_study, accumulated group by group in constant memory."""
     accumulator = StatsAccumulator()
     batch: list[ProblemRecord] = []
-    for records in iter_groups(groups, game, params, teacher, seed, on_group):
+    for records in iter_groups(groups, game, params, teacher, seed, on_group, recover=recover):
         batch.extend(records)
         if len(batch) >= 4096:
             accumulator.add(batch)

@@ -24,9 +24,11 @@ from typing import Any
 from msgspec import UNSET
 
 from kasparctl.game.records import (
+    AlertRecord,
     AnyRecord,
     CommandRecord,
     Confirmation,
+    ConfusedRecord,
     FaultRecord,
     HalEvent,
     HalRecord,
@@ -34,6 +36,7 @@ from kasparctl.game.records import (
     PressRecord,
     PromptRecord,
     QuestionRecord,
+    ReopenRecord,
     SessionEvent,
     SessionRecord,
     StepRecord,
@@ -224,9 +227,7 @@ def _on_hal(view: SessionView, record: HalRecord) -> SessionView:
     if record.event is HalEvent.RESEARCHER_LOST:
         # Nothing stops for it: the researcher's holds on the children's keyfob meanwhile.
         reason = record.reason if isinstance(record.reason, str) else "lost"
-        return replace(
-            view, faults=(*view.faults, FaultSeen(record.time, "researcher", reason))
-        )
+        return replace(view, faults=(*view.faults, FaultSeen(record.time, "researcher", reason)))
     status = record.status if isinstance(record.status, str) else "failed"
     said = record.text if isinstance(record.text, str) else ""
     detail = f"line not heard ({status}): {said}" if said else f"line not heard ({status})"
@@ -341,11 +342,14 @@ def _on_trial(view: SessionView, record: TrialRecord) -> SessionView:
         time=record.time,
     )
     learned = view.learned
+    confused = view.confused
     if record.learned:
         learned = (
             *learned,
             Learned(record.target, record.choice, record.problem_trial, record.trial),
         )
+        if confused is not None and confused.startswith(f"{record.target}:"):
+            confused = None
     return replace(
         view,
         question=question,
@@ -353,7 +357,37 @@ def _on_trial(view: SessionView, record: TrialRecord) -> SessionView:
         answers=(*view.answers, answer),
         learned=learned,
         targets=_with_target(view.targets, record.target),
+        confused=confused,
     )
+
+
+def _on_confused(view: SessionView, record: ConfusedRecord) -> SessionView:
+    if record.reason == "learned_elsewhere" and isinstance(record.name, str):
+        why = f"{record.name} was answered green here, learned for {record.learned_for}"
+    else:
+        why = "every name left was answered red"
+    if record.reopen_name is not None:
+        ask = f"; reopen makes {record.reopen_name} ({record.reopen_target}) unlearned"
+    else:
+        ask = ""
+    return replace(view, confused=f"{record.target}: {why}{ask}")
+
+
+def _on_reopen(view: SessionView, record: ReopenRecord) -> SessionView:
+    if record.taken_back is True:
+        learned = (*view.learned, Learned(record.target, record.name, 0, record.trial))
+        return replace(view, learned=learned, reopens=max(0, view.reopens - 1))
+    learned = tuple(item for item in view.learned if item.target != record.target)
+    alerts = tuple(alert for alert in view.alerts if not alert.startswith(f"{record.name} "))
+    return replace(view, learned=learned, reopens=view.reopens + 1, confused=None, alerts=alerts)
+
+
+def _on_alert(view: SessionView, record: AlertRecord) -> SessionView:
+    line = (
+        f"{record.toy} (right for {record.target}) no longer offered: "
+        f"learned for {record.learned_for}"
+    )
+    return replace(view, alerts=(*view.alerts, line))
 
 
 def _on_undo(view: SessionView, record: UndoRecord) -> SessionView:
@@ -380,4 +414,7 @@ _HANDLERS: dict[type, Any] = {
     QuestionRecord: _on_question,
     TrialRecord: _on_trial,
     UndoRecord: _on_undo,
+    ConfusedRecord: _on_confused,
+    ReopenRecord: _on_reopen,
+    AlertRecord: _on_alert,
 }

@@ -205,6 +205,10 @@ def _header(view: WatchView, now: dt.datetime, width: int, glyphs: Glyphs) -> li
         what = f"{fault.source} {fault.joint}" if fault.joint else fault.source
         row = _Row(width).add(f"FAULT {what}", "bad").add(f" {ago(fault.time, now)}", "dim")
         lines.append(row.add(f": {fault.detail}").line())
+    if session.confused is not None and not session.ended:
+        lines.append(_Row(width).add("CONFUSED ", "warn").add(session.confused).line())
+    for alert in session.alerts[-2:]:
+        lines.append(_Row(width).add("ALERT ", "warn").add(alert).line())
     return lines
 
 

@@ -153,6 +153,12 @@ class SessionView:
     commands: tuple[CommandSeen, ...] = ()
     faults: tuple[FaultSeen, ...] = ()
     keyfob_lost: bool = False
+    # Kaspar is confused and asks the researcher (kasparctl.game.recovery): what to tell
+    # them, until a name is re-opened or the target is learned; None otherwise.
+    confused: str | None = None
+    # Right toys no longer offered (with the answer key), until re-opened: one line each.
+    alerts: tuple[str, ...] = ()
+    reopens: int = 0  # names the researcher re-opened (less those taken back)
     records: int = 0
     last_seq: int = 0
     last_time: str | None = None
