@@ -261,8 +261,10 @@ def test_a_fitted_teacher_recovers_the_childrens_rates(tmp_path: Path, capsys: p
     model = load_teacher(str(out))
     assert len(model.children) == 3
     pooled = model.pooled()
-    assert pooled.p_wrong_green == pytest.approx(0.3, abs=0.08)
-    assert pooled.p_wrong_red == pytest.approx(0.1, abs=0.06)
+    # The demo's children answer honestly after a prompt (30 % of questions), so the
+    # rates a fit of every answer can recover are 0.3 and 0.1 of the other 70 %.
+    assert pooled.p_wrong_green == pytest.approx(0.3 * 0.7, abs=0.06)
+    assert pooled.p_wrong_red == pytest.approx(0.1 * 0.7, abs=0.05)
     assert pooled.p_no_answer == pytest.approx(0.3, abs=0.08)  # prompts: the demo's silence
     for child in model.children:
         assert child.answers > 50
