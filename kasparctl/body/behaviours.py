@@ -270,10 +270,16 @@ def _explain(message: str, table: Any) -> str:
         if match is None:
             continue
         path = match.group("at") or "$"
-        segments = re.findall(r"\.([^.\[]+)|\[(\d+)\]", path.removeprefix("$"))
+        segments = re.findall(r"\.([^.\[]+)|\[(\d+|\.\.\.)\]", path.removeprefix("$"))
         words, value = [], table
         for key, index in segments:
-            if index:
+            if index == "..." and isinstance(value, dict):
+                # msgspec does not name a table's key: the first value not a number is it.
+                key = next((k for k, v in value.items()
+                            if isinstance(v, bool) or not isinstance(v, int | float)), "?")
+                value = value.get(key)
+                words.append(key)
+            elif index:
                 position = int(index)
                 value = value[position] if isinstance(value, list) else None
                 words.append(f"keyframe {position + 1}" if not words or words == ["keyframes"]

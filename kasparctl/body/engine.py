@@ -140,6 +140,8 @@ class LiveBody:
         self._fault_seen = False
         # Set to a list to collect each tick's lateness in seconds (bench/bench_body_loop.py).
         self.lateness: list[float] | None = None
+        # A latched fault ends every behaviour at once, loop running or not.
+        servos.on_fault(self._on_fault)
 
     # --- the Body interface -------------------------------------------------------------
 
@@ -147,15 +149,14 @@ class LiveBody:
         """Begin the control loop; the body is not alive until set_alive(True)."""
         if self._task is not None:
             return
-        self._servos.on_fault(self._on_fault)
         self._task = asyncio.get_running_loop().create_task(self._run(), name="body loop")
 
     async def close(self) -> None:
         """Cancel everything and stop the loop; idempotent."""
         self.cancel()
+        self._servos.off_fault(self._on_fault)
         task, self._task = self._task, None
         if task is not None:
-            self._servos.off_fault(self._on_fault)
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
