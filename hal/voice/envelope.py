@@ -38,6 +38,11 @@ class EnvelopeListener(Protocol):
         ...
 
 
+def frame_seconds(rate: int, frame_s: float = FRAME_S) -> float:
+    """The true length of a frame at `rate`: a whole number of samples near `frame_s`."""
+    return max(1, round(rate * frame_s)) / rate
+
+
 def rms_levels(pcm: bytes, width: int, channels: int, rate: int, frame_s: float = FRAME_S
                ) -> list[float]:
     """RMS per frame of little-endian PCM (8-bit unsigned or 16-bit signed), 0 to 1.
@@ -66,7 +71,8 @@ def rms_levels(pcm: bytes, width: int, channels: int, rate: int, frame_s: float 
 
 
 def wav_levels(path: Path, frame_s: float = FRAME_S) -> tuple[list[float], float]:
-    """RMS levels of a WAV file and its duration in seconds; wave.Error/OSError if unreadable."""
+    """RMS levels of a WAV file's frames (each frame_seconds(rate) long) and its duration in
+    seconds; wave.Error or OSError if it cannot be read."""
     with wave.open(str(path), "rb") as audio:
         rate, width, channels = audio.getframerate(), audio.getsampwidth(), audio.getnchannels()
         pcm = audio.readframes(audio.getnframes())
@@ -112,18 +118,18 @@ class StreamMeter:
         chunk, self._pending = self._pending[:whole], self._pending[whole:]
         levels = rms_levels(chunk, width, channels, rate)
         assert self._anchor is not None
-        start = self._anchor + self._frames_sent * FRAME_S
+        frame = frame_seconds(rate)
+        start = self._anchor + self._frames_sent * frame
         self._frames_sent += len(levels)
-        self._listener.on_envelope(start, FRAME_S, levels)
+        self._listener.on_envelope(start, frame, levels)
 
     def end(self, cut: bool) -> None:
         """The stream is over: report a last partial frame (unless cut), then the end."""
         if self._format is not None and self._pending and not cut and self._anchor is not None:
             rate, width, channels = self._format
             levels = rms_levels(self._pending, width, channels, rate)
-            self._listener.on_envelope(
-                self._anchor + self._frames_sent * FRAME_S, FRAME_S, levels
-            )
+            frame = frame_seconds(rate)
+            self._listener.on_envelope(self._anchor + self._frames_sent * frame, frame, levels)
         self._pending = b""
         self._listener.on_end(cut)
 
