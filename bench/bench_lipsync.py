@@ -22,7 +22,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT)]
 
-from hal.voice.envelope import frame_seconds, wav_levels  # noqa: E402
+from hal.voice.envelope import wav_levels  # noqa: E402
 from hal.voice.settings import VoiceSettings  # noqa: E402
 from kasparctl.commands.motion import say_with_motion  # noqa: E402
 from kasparctl.sim.demo import demo_config  # noqa: E402
@@ -68,9 +68,10 @@ def measure(line: str, folder: Path, number: int) -> tuple[float, float]:
     spoken, _ = say_with_motion(config, VoiceSettings(engine="espeak-ng"), line, None,
                                 str(wav), str(motion))
     assert spoken.finished, spoken
-    levels, seconds = wav_levels(wav)
+    levels, frame = wav_levels(wav)
+    seconds = len(levels) * frame
     grid = np.arange(0.0, seconds, GRID_S)
-    audio = series([(i * frame_seconds(22050), level) for i, level in enumerate(levels)], grid)
+    audio = series([(i * frame, level) for i, level in enumerate(levels)], grid)
     with motion.open(encoding="utf-8") as file:
         rows = [(float(r["time_s"]), float(r["position_deg"])) for r in csv.DictReader(file)
                 if r["joint"] == config.body.mouth_joint]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import random
 
 import msgspec
@@ -206,7 +207,7 @@ def assert_safe(rows: list[tuple[float, str, float]], start: dict[str, float]) -
         assert low - unit <= degrees <= high + unit, (name, degrees)
         before, previous = last[name]
         if before is not None:
-            allowed = joint.max_speed_dps * (time - before) + 2 * unit
+            allowed = joint.max_speed_dps * (time - before) + 2 * unit + 1e-9
             assert abs(degrees - previous) <= allowed, (name, time, degrees, previous)
         last[name] = (time, degrees)
 
@@ -381,12 +382,14 @@ async def test_a_behaviour_through_herkulex_servos_emulated_on_a_pty(tmp_path):
     rows = [(t, by_id[i].name, by_id[i].servo.to_degrees(raw, 1, 0.0)) for t, i, raw in seen
             if i in by_id]
     assert len({name for _, name, _ in rows}) == 2
-    global JOINTS
-    saved, JOINTS = JOINTS, {**JOINTS, **{j.name: j for j in joints}}
-    try:
-        assert_safe([r for r in rows if r[0] > min(t for t, _, _ in rows)], start)
-    finally:
-        JOINTS = saved
+    # The emulator stamps a packet when it reads it, which may be a tick late (a jog has no
+    # reply to wait for): check by order. The body sends at most one goal per joint a tick.
+    for joint in joints:
+        values = [start[joint.name]] + [v for _, n, v in rows if n == joint.name]
+        unit = joint.servo.degrees_per_unit
+        steps = [abs(b - a) for a, b in itertools.pairwise(values)]
+        assert max(steps) <= joint.max_speed_dps * PERIOD + 2 * unit + 1e-9, joint.name
+        assert all(joint.range_deg[0] - unit <= v <= joint.range_deg[1] + unit for v in values)
     assert min(v for _, n, v in rows if n == "head_roll") >= -15.0 - 0.33  # clamped
 
 

@@ -77,7 +77,7 @@ async def test_a_cut_line_closes_the_mouth_at_once(tmp_path):
         voice.say("This is a long line that will be cut before its end, by the researcher."))
     while not heard.pieces:
         await asyncio.sleep(0.01)
-    (start, frame, levels) = heard.pieces[0]
+    (_, _, levels) = heard.pieces[0]
     assert levels  # the samples passed through us on their way to the player
     voice.cancel()
     spoken = await line

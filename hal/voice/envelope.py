@@ -71,13 +71,12 @@ def rms_levels(pcm: bytes, width: int, channels: int, rate: int, frame_s: float 
 
 
 def wav_levels(path: Path, frame_s: float = FRAME_S) -> tuple[list[float], float]:
-    """RMS levels of a WAV file's frames (each frame_seconds(rate) long) and its duration in
-    seconds; wave.Error or OSError if it cannot be read."""
+    """RMS levels of a WAV file's frames and their length in seconds (frame_seconds of its
+    rate); wave.Error or OSError if it cannot be read."""
     with wave.open(str(path), "rb") as audio:
         rate, width, channels = audio.getframerate(), audio.getsampwidth(), audio.getnchannels()
         pcm = audio.readframes(audio.getnframes())
-    levels = rms_levels(pcm, width, channels, rate, frame_s)
-    return levels, len(pcm) / (width * channels * rate)
+    return rms_levels(pcm, width, channels, rate, frame_s), frame_seconds(rate, frame_s)
 
 
 class StreamMeter:

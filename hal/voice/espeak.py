@@ -13,10 +13,10 @@ from pathlib import Path
 from hal.errors import VoiceError
 from hal.voice.envelope import StreamMeter
 from hal.voice.processes import finish, spawn, stop, telling_lines
+from hal.voice.settings import VoiceSettings
 
 # Bytes read from espeak-ng at a time when the stream passes through us (about 90 ms).
 STREAM_CHUNK = 4096
-from hal.voice.settings import VoiceSettings
 
 
 def espeak_argv(settings: VoiceSettings) -> list[str]:

@@ -8,7 +8,6 @@ a player hears its first words before the rest is synthesised.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import shutil
 import tempfile
 import wave
@@ -18,7 +17,7 @@ from typing import Protocol
 from hal.clock import Clock, MonotonicClock
 from hal.errors import InvalidArgument, VoiceError
 from hal.voice import espeak
-from hal.voice.envelope import EnvelopeListener, StreamMeter, frame_seconds, wav_levels
+from hal.voice.envelope import EnvelopeListener, StreamMeter, wav_levels
 from hal.voice.processes import run
 from hal.voice.settings import VoiceSettings
 
@@ -58,13 +57,9 @@ class Listened:
         if self.listener is None:
             return
         try:
-            levels, seconds = await asyncio.to_thread(wav_levels, path)
+            levels, frame = await asyncio.to_thread(wav_levels, path)
         except (OSError, EOFError, wave.Error, ValueError) as error:
             raise VoiceError(f"{path}: not a WAV the mouth can follow: {error}") from error
-        frame = seconds / len(levels) if levels else frame_seconds(1)
-        with contextlib.suppress(OSError, EOFError, wave.Error):
-            with wave.open(str(path), "rb") as audio:
-                frame = frame_seconds(audio.getframerate())
         self.listener.on_envelope(self.clock.now(), frame, levels)
 
     def _ended(self, cut: bool) -> None:

@@ -27,10 +27,10 @@ import structlog
 from hal.clock import Clock, MonotonicClock
 from hal.errors import VoiceError
 from hal.voice.api import Spoken, SpokenStatus
+from hal.voice.envelope import EnvelopeListener
 from hal.voice.espeak import espeak_argv
 from hal.voice.pyttsx3_thread import Pyttsx3Engine, Pyttsx3Thread, default_engine_factory
 from hal.voice.settings import VoiceSettings
-from hal.voice.envelope import EnvelopeListener
 from hal.voice.sinks import Listened, Sink, WavSink, sink_for
 
 log = structlog.get_logger("kaspar.voice")

@@ -256,7 +256,9 @@ def _compile(name: str, spec: _Spec, specs: Mapping[str, _Spec], source: str) ->
 
 _UNKNOWN = re.compile(r"Object contains unknown field `(?P<key>[^`]+)`(?: - at `(?P<at>[^`]+)`)?")
 _MISSING = re.compile(r"Object missing required field `(?P<key>[^`]+)`(?: - at `(?P<at>[^`]+)`)?")
-_TYPE = re.compile(r"Expected `(?P<expected>[^`]+)`, got `(?P<got>[^`]+)`(?: - at `(?P<at>[^`]+)`)?")
+_TYPE = re.compile(
+    r"Expected `(?P<expected>[^`]+)`, got `(?P<got>[^`]+)`(?: - at `(?P<at>[^`]+)`)?"
+)
 _WORDS = {
     "float": "a number", "int": "a whole number", "str": "text", "bool": "true or false",
     "object": "a table", "array": "a list", "null": "nothing",

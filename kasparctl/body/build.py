@@ -1,4 +1,4 @@
-"""The body the configuration asks for: the live body over these servos and voice, or a still one."""
+"""The body the configuration asks for: a live body over these servos and voice, or a still one."""
 
 from __future__ import annotations
 

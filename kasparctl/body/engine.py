@@ -260,7 +260,8 @@ class LiveBody:
         if self._mouth_joint is not None and self._mouth_joint in held:
             opening = self.mouth.opening(now)
             if opening is not None:
-                out[self._mouth_joint] = self._mouth_closed + opening * self._settings.mouth_open_deg
+                span = self._settings.mouth_open_deg
+                out[self._mouth_joint] = self._mouth_closed + opening * span
         if self._gesture is not None:
             self._gesture = self._relative(self._gesture, now, held, out)
         return {joint: value for joint, value in out.items() if joint in held}

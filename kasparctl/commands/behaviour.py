@@ -1,4 +1,4 @@
-"""`kasparctl behaviour check/play/record`: Kaspar's behaviour files against the robot, played, recorded.
+"""`kasparctl behaviour check/play/record`: behaviour files checked, played and recorded.
 
 check: every behaviour file (the shipped phrases/behaviours/, or body.behaviours_dir)
 against the configured joints: an unknown joint, a keyframe that would be clamped or
