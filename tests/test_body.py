@@ -396,3 +396,73 @@ async def test_a_behaviour_through_herkulex_servos_emulated_on_a_pty(tmp_path):
 def test_behaviour_is_a_frozen_value():
     with pytest.raises(AttributeError):
         Behaviour("x", "y", "", ()).name = "z"  # type: ignore[misc]
+
+
+# --- behaviour record and the command line ----------------------------------------------
+
+
+async def test_a_behaviour_recorded_by_hand_is_saved_as_offsets_and_reads_back(tmp_path):
+    import asyncio
+    import io
+
+    from kasparctl.commands.behaviour import record
+    from kasparctl.commands.bringup import Engineer
+
+    config = msgspec.structs.replace(
+        CONFIG, body=msgspec.structs.replace(CONFIG.body, behaviours_dir=str(tmp_path)))
+    clock = FakeClock()
+    servos = SimServos(config.servos, clock)
+    engineer = Engineer(config, clock, seconds=1.0, quiet=True, out=io.StringIO())
+    presses: asyncio.Queue[str] = asyncio.Queue()
+
+    async def demonstrate() -> None:
+        while not servos.commanded() or servos.servo("head_yaw").torque:
+            await asyncio.sleep(0)
+        for degrees in (10.0, -5.0):
+            clock.t += 0.5
+            servos.push("head_yaw", degrees)
+            presses.put_nowait("key")
+            await asyncio.sleep(0.01)
+        presses.put_nowait("save")
+
+    helper = asyncio.ensure_future(demonstrate())
+    path = await record(config, servos, engineer, "look", ["head_yaw"], presses)
+    await helper
+    assert path == tmp_path / "look.toml"
+    (look,) = load_library(tmp_path).values()
+    assert [pose["head_yaw"] for _, pose in look.keyframes] == pytest.approx([10.0, -5.0], abs=0.4)
+
+
+def test_behaviour_check_and_play_on_the_command_line(tmp_path, capsys):
+    from kasparctl.cli import main
+
+    config = tmp_path / "k.toml"
+    config.write_text(_demo_toml("[body]\nenabled = true\n"), encoding="utf-8")
+    assert main(["behaviour", "check", "--config", str(config)]) == 0
+    assert "12 behaviours fit the robot's 22 joints" in capsys.readouterr().out
+    motion = tmp_path / "nod.csv"
+    assert main(["behaviour", "play", "nod", "--config", str(config), "--motion",
+                 str(motion)]) == 0
+    assert "head_pitch +0.0..+9.0" in capsys.readouterr().out
+    lines = motion.read_text(encoding="utf-8").splitlines()
+    assert lines[0] == "time_s,joint,position_deg" and {ln.split(",")[1] for ln in lines[1:]} == {
+        "head_pitch"}
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "x.toml").write_text("[quick]\nkeyframes = [{ time = 0.1, pose = { head_yaw = 30.0 }"
+                                 " }]\n", encoding="utf-8")
+    config.write_text(_demo_toml(f"[body]\nbehaviours_dir = '{mine}'\n"), encoding="utf-8")
+    assert main(["behaviour", "check", "--config", str(config)]) == 1
+    assert "behaviour 'quick', keyframe 1 (at 0.1 s), joint head_yaw: too fast" in (
+        capsys.readouterr().out)
+
+
+def test_say_motion_writes_the_mouth_from_time_zero(tmp_path, capsys):
+    from kasparctl.cli import main
+
+    motion, wav = tmp_path / "m.csv", tmp_path / "m.wav"
+    assert main(["say", "Hello there, children.", "--wav", str(wav), "--motion", str(motion)]) == 0
+    rows = [line.split(",") for line in motion.read_text(encoding="utf-8").splitlines()[1:]]
+    assert {row[1] for row in rows} == {"mouth_open"}
+    assert max(float(row[2]) for row in rows) > 5.0 and float(rows[-1][2]) == 0.0
+    assert float(rows[0][0]) >= 0.0 and float(rows[0][2]) == 0.0  # closed at the first sample
