@@ -1,8 +1,8 @@
 """The body's control loop with every layer on: 22 joints at 50 Hz, on the real clock.
 
-Kaspar 3's 22 joints (the demo robot) on the simulated servos behind the real joints
-layer; gaze moving between seats, blinks and idle movements at short intervals, the
-mouth following a continuous envelope, and a gesture always playing. Reports the CPU
+Kaspar 3's 22 joints (systemd/kaspar-3.toml, with the demo's gaze directions) on the
+simulated servos behind the real joints layer; gaze moving between seats, blinks and
+idle movements at short intervals, the mouth following a continuous envelope, and a gesture always playing. Reports the CPU
 time of this process per second of wall time (% of one core; target < 5 %) and the
 tick lateness p99 against the loop's absolute schedule (target < 2 ms), quiet machine.
 Run: .venv/bin/python bench/bench_body_loop.py [seconds]
@@ -27,6 +27,8 @@ from hal.servos.sim import SimServos  # noqa: E402
 from kasparctl.body.api import Gaze, GazeKind  # noqa: E402
 from kasparctl.body.behaviours import load_library  # noqa: E402
 from kasparctl.body.engine import LiveBody  # noqa: E402
+from kasparctl.config import load_config  # noqa: E402
+from kasparctl.log import configure_logging  # noqa: E402
 from kasparctl.sim.demo import demo_config  # noqa: E402
 
 TARGET_CPU_PERCENT = 5.0
@@ -39,9 +41,11 @@ def row(name: str, value: str, target: str, ok: bool) -> None:
 
 
 async def main(seconds: float) -> None:
-    config = demo_config()
-    servo_settings = msgspec.structs.replace(config.servos, control_hz=50.0)
-    settings = msgspec.structs.replace(config.body, rate_hz=50.0, blink_interval_s=(0.5, 1.0),
+    configure_logging("warning", "console", stream=sys.stderr)
+    config = load_config(ROOT / "systemd" / "kaspar-3.toml", poses=False)
+    servo_settings = msgspec.structs.replace(config.servos, backend="sim", control_hz=50.0)
+    settings = msgspec.structs.replace(demo_config().body, rate_hz=50.0,
+                                       blink_interval_s=(0.5, 1.0),
                                        idle_interval_s=(0.5, 1.0))
     clock = MonotonicClock()
     servos = SimServos(servo_settings, clock)

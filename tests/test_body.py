@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import random
+from pathlib import Path
 
 import msgspec
 import pytest
@@ -27,7 +28,7 @@ from kasparctl.body.behaviours import (
 from kasparctl.body.build import make_body
 from kasparctl.body.check import problems
 from kasparctl.body.engine import LiveBody
-from kasparctl.config import BodySettings, ConfigError, parse_config
+from kasparctl.config import BodySettings, ConfigError, load_config, parse_config
 from kasparctl.sim.demo import demo_config
 
 CONFIG = demo_config()
@@ -38,11 +39,17 @@ PERIOD = 0.02
 # --- the file format --------------------------------------------------------------------
 
 
-def test_every_shipped_behaviour_fits_kaspar_3_and_the_demo_robot():
+KASPAR_3 = Path(__file__).resolve().parent.parent / "systemd" / "kaspar-3.toml"
+
+
+def test_every_shipped_behaviour_fits_kaspar_3_and_the_demo_face():
     library = load_library()
     assert {"greeting", "happy", "sad", "thinking", "wave", "nod", "shake", "farewell",
             "blink", "idle"} <= set(library)
-    assert problems(library, CONFIG.servos) == []
+    assert problems(library, load_config(KASPAR_3, poses=False).servos) == []
+    # The demo robot has Kaspar 3's head and face, and only the pointing arm's three joints.
+    missing = {line.split("joint ")[1].split(":")[0] for line in problems(library, CONFIG.servos)}
+    assert missing == {"right_wrist", "left_shoulder_roll", "left_elbow", "left_wrist"}
 
 
 def test_an_unknown_key_in_a_keyframe_names_file_behaviour_keyframe_and_key():
@@ -410,7 +417,13 @@ async def test_a_behaviour_recorded_by_hand_is_saved_as_offsets_and_reads_back(t
 
     config = msgspec.structs.replace(
         CONFIG, body=msgspec.structs.replace(CONFIG.body, behaviours_dir=str(tmp_path)))
-    clock = FakeClock()
+    class StillClock(FakeClock):
+        """Time moves only when the test says (the health poll waits without moving it)."""
+
+        async def sleep(self, seconds: float) -> None:
+            await asyncio.sleep(0.001)
+
+    clock = StillClock()
     servos = SimServos(config.servos, clock)
     engineer = Engineer(config, clock, seconds=1.0, quiet=True, out=io.StringIO())
     presses: asyncio.Queue[str] = asyncio.Queue()
@@ -431,15 +444,16 @@ async def test_a_behaviour_recorded_by_hand_is_saved_as_offsets_and_reads_back(t
     assert path == tmp_path / "look.toml"
     (look,) = load_library(tmp_path).values()
     assert [pose["head_yaw"] for _, pose in look.keyframes] == pytest.approx([10.0, -5.0], abs=0.4)
+    assert [time for time, _ in look.keyframes] == pytest.approx([0.5, 1.0])
 
 
 def test_behaviour_check_and_play_on_the_command_line(tmp_path, capsys):
     from kasparctl.cli import main
 
+    assert main(["behaviour", "check", "--config", str(KASPAR_3)]) == 0
+    assert "12 behaviours fit the robot's 22 joints" in capsys.readouterr().out
     config = tmp_path / "k.toml"
     config.write_text(_demo_toml("[body]\nenabled = true\n"), encoding="utf-8")
-    assert main(["behaviour", "check", "--config", str(config)]) == 0
-    assert "12 behaviours fit the robot's 22 joints" in capsys.readouterr().out
     motion = tmp_path / "nod.csv"
     assert main(["behaviour", "play", "nod", "--config", str(config), "--motion",
                  str(motion)]) == 0
