@@ -3,7 +3,8 @@
 Kaspar 3's 22 joints (systemd/kaspar-3.toml, with the demo's gaze directions) on the
 simulated servos behind the real joints layer; gaze moving between seats, blinks and
 idle movements at short intervals, the mouth following a continuous envelope, and a
-gesture always playing. Reports the CPU time of this process per second of wall time (% of one core; target < 5 %) and the
+gesture always playing. Reports the CPU time of this process
+per second of wall time (% of one core; target < 5 %) and the
 tick lateness p99 against the loop's absolute schedule (target < 2 ms), quiet machine.
 Run: .venv/bin/python bench/bench_body_loop.py [seconds]
 """
