@@ -32,6 +32,7 @@ COMMAND_MODULES = (
     "install",
     "servos",
     "pose",
+    "behaviour",
     "say",
     "sessions",
     "export",

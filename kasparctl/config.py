@@ -271,6 +271,45 @@ class DaemonSettings(_Settings, frozen=True):
     stop_action: Literal["hold", "torque_off"] = "hold"
 
 
+class GazeSettings(_Settings, frozen=True):
+    """The `[body.gaze]` table: where Kaspar's head and eyes turn, as poses (joint = degrees)."""
+
+    ahead: dict[str, float] = {}
+    # One pose per seat (the first child's first) and per bag; an index beyond them
+    # looks ahead.
+    children: tuple[dict[str, float], ...] = ()
+    bags: tuple[dict[str, float], ...] = ()
+    researcher: dict[str, float] = {}
+
+
+Seconds = Annotated[float, msgspec.Meta(ge=0.1, le=120.0, extra={"unit": "s"})]
+
+
+class BodySettings(_Settings, frozen=True):
+    """The `[body]` table: Kaspar's body language (kasparctl.body, docs/body.md)."""
+
+    # Off: the game's body shows nothing (kasparctl.body.api.StillBody).
+    enabled: bool = False
+    # The body's control loop: goals per second to every joint a layer moves.
+    rate_hz: Annotated[float, msgspec.Meta(ge=5.0, le=200.0, extra={"unit": "Hz"})] = 50.0
+    # The joint that opens the mouth with the voice ("" for none), how far it opens from
+    # its rest (signed degrees) and the sound level (RMS of full scale) that opens it fully.
+    mouth_joint: str = "mouth_open"
+    mouth_open_deg: Annotated[float, msgspec.Meta(ge=-90.0, le=90.0, extra={"unit": "deg"})] = 10.0
+    mouth_full_level: Annotated[float, msgspec.Meta(gt=0.0, le=1.0)] = 0.2
+    # Seconds between the samples reaching the player and being heard; unset: the
+    # player's default (docs/body.md).
+    latency_s: Annotated[float, msgspec.Meta(ge=0.0, le=2.0, extra={"unit": "s"})] | None = None
+    # Blinks and idle movements at random intervals drawn between the two bounds.
+    blink_interval_s: tuple[Seconds, Seconds] = (2.0, 6.0)
+    idle_interval_s: tuple[Seconds, Seconds] = (3.0, 9.0)
+    # Scales the idle behaviour's offsets (0: no idle movement).
+    idle_amplitude: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 1.0
+    # A directory of behaviour files replacing the shipped phrases/behaviours/.
+    behaviours_dir: str | None = None
+    gaze: GazeSettings = GazeSettings()
+
+
 class Config(_Settings, frozen=True):
     """The whole of kaspar.toml, every table with its defaults."""
 
@@ -305,6 +344,7 @@ class Config(_Settings, frozen=True):
     researcher: ResearcherSettings = ResearcherSettings()
     voice: VoiceSettings = VoiceSettings()
     daemon: DaemonSettings = DaemonSettings()
+    body: BodySettings = BodySettings()
 
     def profile(self, name: str | None = None) -> LearnerParams:
         """A profile's learner (the default profile's without a name); KeyError if unknown."""
@@ -753,6 +793,7 @@ def _validate(config: Config, source: str) -> None:
     _check_sessions(config, fail)
     _check_researcher(config, fail)
     _check_interaction(config.game, fail)
+    _check_body(config, fail)
     _check_toy_names(config, source)
 
 
@@ -849,6 +890,34 @@ def _check_game_servos(config: Config, fail: _Fail) -> None:
             check_pose(pose, key.removeprefix("game."), servos, "")
         except ConfigError as error:
             fail(f"game.{error.key}", error.message)
+
+
+def _check_body(config: Config, fail: _Fail) -> None:
+    """The body's intervals are ordered, and its mouth and gaze name configured joints
+    within their ranges (only checked when it is enabled on a robot with joints)."""
+    body = config.body
+    for key in ("blink_interval_s", "idle_interval_s"):
+        low, high = getattr(body, key)
+        if low > high:
+            fail(f"body.{key}", f"expected [shortest, longest], found [{low}, {high}]")
+    if not body.enabled or not config.servos.joints:
+        return
+    joints = {joint.name: joint for joint in config.servos.joints}
+    if body.mouth_joint and body.mouth_joint not in joints:
+        fail("body.mouth_joint", f"expected a configured joint ({', '.join(joints)}) or \"\", "
+                                 f"found {body.mouth_joint!r}")
+    gaze = body.gaze
+    poses = {"ahead": gaze.ahead, "researcher": gaze.researcher}
+    poses.update({f"children[{i}]": pose for i, pose in enumerate(gaze.children)})
+    poses.update({f"bags[{i}]": pose for i, pose in enumerate(gaze.bags)})
+    for key, pose in poses.items():
+        for joint, degrees in pose.items():
+            if not math.isfinite(degrees):
+                fail(f"body.gaze.{key}.{joint}", f"expected a finite number, found {degrees}")
+        try:
+            check_pose(pose, key, config.servos, "")
+        except ConfigError as error:
+            fail(f"body.gaze.{error.key}", error.message)
 
 
 def _check_pointing_group(config: Config, fail: _Fail) -> None:

@@ -38,9 +38,9 @@ HAPPY = "happy_pose = { smile = 20.0, head_pitch = -8.0 }"
 REFUSED = {
     # A pointing arm that is no group of joints: step 2 failed with KeyError 'right_arm'.
     "pointing_group": (
-        DEMO.replace('pointing_group = "right_arm"', 'pointing_group = "left_arm"'),
-        "game.pointing_group: expected a group of the configured joints (head, face, right_arm), "
-        "found 'left_arm': step 2 teaches with it",
+        DEMO.replace('pointing_group = "right_arm"', 'pointing_group = "tail"'),
+        "game.pointing_group: expected a group of the configured joints (head, face, right_arm, "
+        "eyes), found 'tail': step 2 teaches with it",
     ),
     "no_servos_at_all": (
         "[game]\ntoys = ['lion', 'zebra']\n",
@@ -50,7 +50,8 @@ REFUSED = {
     "happy_pose_unknown_joint": (
         DEMO.replace(HAPPY, "happy_pose = { grin = 20.0 }"),
         "game.happy_pose.grin: not a configured joint (joints: head_yaw, head_pitch, smile, "
-        "right_shoulder_pitch, right_shoulder_roll, right_elbow)",
+        "right_shoulder_pitch, right_shoulder_roll, right_elbow, head_roll, mouth_open, "
+        "left_eyelid, right_eyelid, left_eye_yaw, right_eye_yaw, left_eye_pitch, right_eye_pitch)",
     ),
     "sad_pose_nan": (
         DEMO.replace("sad_pose = { head_pitch = 15.0 }", "sad_pose = { head_pitch = nan }"),

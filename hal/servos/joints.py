@@ -75,6 +75,7 @@ class _Joint:
     present: float | None = None
     torque: bool | None = None  # None until we have set it
     last_sent: float | None = None  # the last goal before torque went off (hobby servos)
+    sent_at: float | None = None  # Clock.now() of the last goal written (stream's speed limit)
 
     @property
     def name(self) -> str:
@@ -242,6 +243,57 @@ class Joints:
                 )
             targets = {j.name: self._clamped(j, pose[j.name]) for j in joints}
             await self._run_profile(joints, targets, duration, speed)
+
+    def commanded(self) -> dict[str, float]:
+        """The last goal of every joint whose torque is on (where it is being held), in degrees."""
+        return {
+            name: j.commanded for name, j in self._joints.items()
+            if j.torque is True and j.commanded is not None
+        }
+
+    async def stream(self, pose: Pose, period: float) -> dict[str, float]:
+        """One control step toward `pose`, for a loop that sends a goal every `period` seconds.
+
+        Each joint's goal is clamped to its range (logged), and moves from its last
+        goal by at most its speed limit times the time since that goal was written
+        (at most `period`: a late step does not catch up). One packet per bus, no
+        waiting beyond it. Joints whose torque is off (teaching) are left alone, and
+        nothing is sent while a move() holds the joints. Returns the goals sent.
+        Raises UnknownJoint, UnsafeCommand (NaN target, bad period) and
+        ServoFaultError while a fault is latched (or one is latched by this write).
+        """
+        unknown = [name for name in pose if name not in self._joints]
+        if unknown:
+            raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
+        if not (period > 0 and math.isfinite(period)):
+            raise UnsafeCommand(f"period must be a finite number > 0, found {period}")
+        if self._motion.locked():
+            return {}  # a move owns the joints until it ends; the next step starts from there
+        self._refuse_if_faulted()
+        now = self.clock.now()
+        sent: dict[str, float] = {}
+        joints = [
+            self._joints[name] for name in pose
+            if self._joints[name].torque is True and self._joints[name].commanded is not None
+        ]
+        for driver, members in self._by_driver(joints).items():
+            goals = {}
+            for joint in members:
+                target = self._clamped(joint, pose[joint.name])
+                start = joint.commanded
+                assert start is not None
+                elapsed = period if joint.sent_at is None else max(0.0, now - joint.sent_at)
+                reach = joint.settings.max_speed_dps * min(period, elapsed)
+                goal = max(start - reach, min(start + reach, target))
+                if goal == start and joint.sent_at is not None:
+                    continue  # nothing to change: no packet for a joint at rest
+                joint.commanded = goal
+                joint.sent_at = now
+                goals[joint.servo_id] = (joint.to_raw(goal), joint.settings.max_speed_dps)
+                sent[joint.name] = goal
+            if goals:
+                await self._guarded(members[0], driver.write_goals(goals, period))
+        return sent
 
     async def set_compliant(self, group: str, compliant: bool) -> None:
         """Torque off for `group` (or one joint), or back on holding where each joint is.
@@ -598,6 +650,7 @@ class Joints:
                     joint.commanded = max(low, min(high, start + (end - start) * fraction))
                     goals[joint.servo_id] = (joint.to_raw_unclamped(joint.commanded),
                                              limits[joint.name])
+                    joint.sent_at = self.clock.now()
                 await self._guarded(members[0], driver.write_goals(goals, self.step))
             # Absolute schedule: a late step is not followed by a catch-up burst.
             delay = begin + k * self.step - self.clock.now()

@@ -10,8 +10,13 @@ import asyncio
 import os
 from pathlib import Path
 
-from hal.voice.processes import finish, spawn, stop
+from hal.errors import VoiceError
+from hal.voice.envelope import StreamMeter
+from hal.voice.processes import finish, spawn, stop, telling_lines
 from hal.voice.settings import VoiceSettings
+
+# Bytes read from espeak-ng at a time when the stream passes through us (about 90 ms).
+STREAM_CHUNK = 4096
 
 
 def espeak_argv(settings: VoiceSettings) -> list[str]:
@@ -56,6 +61,51 @@ async def stream_to_player(argv: list[str], player: list[str], text: str) -> Non
     finally:
         await stop(synth)
         await stop(playing)
+
+
+async def stream_through(
+    argv: list[str], player: list[str], text: str, meter: StreamMeter
+) -> None:
+    """As stream_to_player, but the samples pass through this process on their way, so
+    that `meter` hears each piece as the player receives it (the mouth follows them).
+
+    Raises VoiceError as stream_to_player; the meter is told of the end, cut or not.
+    """
+    synth = await spawn([*argv, "--stdout"], stdin=True, stdout=asyncio.subprocess.PIPE)
+    try:
+        playing = await spawn([*player, "-"], stdin=True)
+    except BaseException:
+        await stop(synth)
+        meter.end(cut=True)
+        raise
+    cut = True
+    try:
+        assert synth.stdin is not None and synth.stdout is not None
+        assert playing.stdin is not None
+        synth.stdin.write(text.encode())
+        synth.stdin.close()
+        while chunk := await synth.stdout.read(STREAM_CHUNK):
+            try:
+                meter.feed(chunk)
+            except ValueError as error:
+                raise VoiceError(f"espeak-ng: {error}") from error
+            playing.stdin.write(chunk)
+            try:
+                await playing.stdin.drain()
+            except (BrokenPipeError, ConnectionResetError):
+                break  # the player died: its exit status says why, below
+        playing.stdin.close()
+        for process, what in ((synth, "espeak-ng"), (playing, "player")):
+            await process.wait()
+            if process.returncode != 0:
+                assert process.stderr is not None
+                detail = telling_lines((await process.stderr.read()).decode(errors="replace"))
+                raise VoiceError(f"{what} exited with {process.returncode}: {detail}")
+        cut = False
+    finally:
+        await stop(synth)
+        await stop(playing)
+        meter.end(cut=cut)
 
 
 async def write_wav(argv: list[str], target: Path, text: str) -> None:

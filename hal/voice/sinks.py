@@ -14,8 +14,10 @@ import wave
 from pathlib import Path
 from typing import Protocol
 
+from hal.clock import Clock, MonotonicClock
 from hal.errors import InvalidArgument, VoiceError
 from hal.voice import espeak
+from hal.voice.envelope import EnvelopeListener, StreamMeter, wav_levels
 from hal.voice.processes import run
 from hal.voice.settings import VoiceSettings
 
@@ -40,7 +42,32 @@ class Sink(Protocol):
         ...
 
 
-class PlayerSink:
+class Listened:
+    """What a sink shares: an optional envelope listener told of the audio it plays."""
+
+    listener: EnvelopeListener | None = None
+    clock: Clock = MonotonicClock()
+
+    def listen(self, listener: EnvelopeListener | None, clock: Clock) -> None:
+        """Tell `listener` (None: nobody) the levels of what is played, stamped by `clock`."""
+        self.listener, self.clock = listener, clock
+
+    async def _announce(self, path: Path) -> None:
+        """Tell the listener the whole file's levels, starting now (it is about to sound)."""
+        if self.listener is None:
+            return
+        try:
+            levels, frame = await asyncio.to_thread(wav_levels, path)
+        except (OSError, EOFError, wave.Error, ValueError) as error:
+            raise VoiceError(f"{path}: not a WAV the mouth can follow: {error}") from error
+        self.listener.on_envelope(self.clock.now(), frame, levels)
+
+    def _ended(self, cut: bool) -> None:
+        if self.listener is not None:
+            self.listener.on_end(cut)
+
+
+class PlayerSink(Listened):
     """Plays through a player command (aplay, or sox's play) that takes a WAV path or "-"."""
 
     def __init__(self, player: tuple[str, ...]) -> None:
@@ -49,6 +76,11 @@ class PlayerSink:
         self._tmp = Path(tempfile.mkdtemp(prefix="kaspar-voice-"))
         self._count = 0
 
+    @property
+    def player(self) -> str:
+        """The player program's name (its latency differs: see the body's mouth)."""
+        return Path(self._player[0]).name
+
     def target(self, via: str) -> tuple[Path, bool]:
         """A fresh file in the temporary directory; it still has to be played."""
         self._count += 1
@@ -56,7 +88,13 @@ class PlayerSink:
 
     async def play_file(self, path: Path, via: str) -> str | None:
         """Play `path` to its end; VoiceError if the player fails. Nothing is stored."""
-        await run([*self._player, str(path)], what="player")
+        cut = True
+        try:
+            await self._announce(path)
+            await run([*self._player, str(path)], what="player")
+            cut = False
+        finally:
+            self._ended(cut)
         return None
 
     def close(self) -> None:
@@ -64,12 +102,17 @@ class PlayerSink:
         shutil.rmtree(self._tmp, ignore_errors=True)
 
     async def espeak(self, argv: list[str], text: str) -> str | None:
-        """Stream espeak-ng straight into the player; nothing is stored."""
-        await espeak.stream_to_player(argv, self._player, text)
+        """Stream espeak-ng straight into the player (through us when someone listens)."""
+        if self.listener is None:
+            await espeak.stream_to_player(argv, self._player, text)
+        else:
+            await espeak.stream_through(
+                argv, self._player, text, StreamMeter(self.listener, self.clock)
+            )
         return None
 
 
-class WavSink:
+class WavSink(Listened):
     """Writes each utterance as a WAV file: numbered files in a directory, or one file."""
 
     def __init__(self, directory: str | Path | None = None, file: str | Path | None = None) -> None:
@@ -101,13 +144,24 @@ class WavSink:
         target, _ = self.target(via)
         if path != target:
             await asyncio.to_thread(shutil.copyfile, path, target)
+        await self.written(target)
         return str(target)
+
+    async def written(self, target: Path) -> None:
+        """A listener hears the file as if it started to play now, and ended (no cut)."""
+        cut = True
+        try:
+            await self._announce(target)
+            cut = False
+        finally:
+            self._ended(cut)
 
     async def espeak(self, argv: list[str], text: str) -> str | None:
         """Render into the next output file; VoiceError if espeak-ng fails or writes no audio."""
         target, _ = self.target("espeak-ng")
         await espeak.write_wav(argv, target, text)
         check_wav(target, "espeak-ng")
+        await self.written(target)
         return str(target)
 
 

@@ -27,10 +27,11 @@ import structlog
 from hal.clock import Clock, MonotonicClock
 from hal.errors import VoiceError
 from hal.voice.api import Spoken, SpokenStatus
+from hal.voice.envelope import EnvelopeListener
 from hal.voice.espeak import espeak_argv
 from hal.voice.pyttsx3_thread import Pyttsx3Engine, Pyttsx3Thread, default_engine_factory
 from hal.voice.settings import VoiceSettings
-from hal.voice.sinks import Sink, sink_for
+from hal.voice.sinks import Listened, Sink, WavSink, sink_for
 
 log = structlog.get_logger("kaspar.voice")
 
@@ -86,6 +87,19 @@ class Voice:
     def engine(self) -> str:
         """The configured engine, tried first ("espeak-ng" or "pyttsx3")."""
         return self._settings.engine
+
+    def listen(self, listener: EnvelopeListener | None) -> bool:
+        """Tell `listener` the levels of every line as its audio reaches the player (the
+        body's mouth follows them); None stops. False when the sink cannot be listened to."""
+        if not isinstance(self._sink, Listened):
+            return False
+        self._sink.listen(listener, self._clock)
+        return True
+
+    @property
+    def player(self) -> str | None:
+        """The player program the sound goes to; None when lines are written to WAV files."""
+        return getattr(self._sink, "player", None)
 
     async def say(self, text: str, key: str | None = None) -> Spoken:
         """Speak `text` (or the clip of phrase `key`) after what is queued; returns when it ends.
@@ -254,6 +268,8 @@ class Voice:
             path.unlink(missing_ok=True)  # no half-written line among the outputs
             raise
         if final:
+            if isinstance(self._sink, WavSink):
+                await self._sink.written(path)
             return str(path)
         try:
             return await self._sink.play_file(path, "pyttsx3")

@@ -16,7 +16,7 @@ from hal.voice.settings import VoiceSettings, voice_for_language
 from hal.voice.sinks import WavSink
 from hal.voice.speaker import Voice
 from kasparctl.commands.arguments import language
-from kasparctl.config import DEFAULT_CONFIG_PATH, ConfigError, load_config
+from kasparctl.config import DEFAULT_CONFIG_PATH, Config, ConfigError, load_config
 from kasparctl.log import configure_logging
 
 
@@ -25,6 +25,11 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser("say", help="speak a line (or write it to a WAV file)")
     parser.add_argument("text", metavar="TEXT", help="what Kaspar says")
     parser.add_argument("--wav", metavar="FILE", help="write a WAV file instead of playing it")
+    parser.add_argument(
+        "--motion", metavar="CSV",
+        help="also write the simulated robot's joint goals (time_s, joint, position_deg; "
+        "time 0 = the WAV's first sample): the mouth following the line",
+    )
     parser.add_argument("--key", help="phrase key: its recorded clip plays if one is configured")
     parser.add_argument("--engine", choices=("pyttsx3", "espeak-ng"), help="override the engine")
     parser.add_argument(
@@ -81,6 +86,8 @@ def run(arguments: argparse.Namespace) -> int:
         if not os.access(folder, os.W_OK):
             print(f"error: --wav {arguments.wav}: {folder}: permission denied", file=sys.stderr)
             return 1
+    if getattr(arguments, "motion", None):
+        return say_motion(arguments, settings)
     spoken = asyncio.run(speak(settings, arguments.text, arguments.key, arguments.wav))
     if not spoken.finished:
         print(f"error: not spoken ({spoken.status.value}): {spoken.error}", file=sys.stderr)
@@ -88,3 +95,33 @@ def run(arguments: argparse.Namespace) -> int:
     if arguments.wav:
         print(f"wrote {arguments.wav} ({spoken.via})")
     return 0
+
+
+def say_motion(arguments: argparse.Namespace, settings: VoiceSettings) -> int:
+    """`say --motion`: the line rendered with the simulated body's mouth (commands.motion)."""
+    from kasparctl.commands.motion import say_with_motion
+
+    path = arguments.config or os.environ.get("KASPAR_CONFIG")
+    if path is None and DEFAULT_CONFIG_PATH.exists():
+        path = str(DEFAULT_CONFIG_PATH)
+    try:
+        config = load_config(path, poses=False) if path else demo_config()
+    except ConfigError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    spoken, rows = say_with_motion(
+        config, settings, arguments.text, arguments.key, arguments.wav, arguments.motion
+    )
+    if not spoken.finished:
+        print(f"error: not spoken ({spoken.status.value}): {spoken.error}", file=sys.stderr)
+        return 1
+    also = f" and {arguments.wav}" if arguments.wav else ""
+    print(f"wrote {arguments.motion} ({rows} goals){also}")
+    return 0
+
+
+def demo_config() -> Config:
+    """Without a configuration: the demo's robot (kasparctl/sim/demo.toml) has a face."""
+    from kasparctl.sim.demo import demo_config as built_in
+
+    return built_in()

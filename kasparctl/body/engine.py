@@ -1,0 +1,349 @@
+"""The live body: layers blended per joint, one control loop, every goal through the joints layer.
+
+Layers, lowest priority first; each claims some joints at each tick, and a higher
+one overrides a lower one on the joints it claims:
+
+1. gaze: head and eyes to where Kaspar looks (absolute poses, minimum-jerk moves);
+2. idle: the idle behaviour's small offsets, *added* to the gaze (life on top of
+   attention, so Kaspar looks at the child and still breathes);
+3. blink: the eyelids, from where they were when the blink began;
+4. mouth: the voice's envelope (kasparctl.body.mouth);
+5. gesture: a behaviour the game performs (nod, thinking, ...), offsets from
+   where each joint was when it began (a nod wherever Kaspar looks).
+
+A gesture is above the mouth: a behaviour that moves the mouth (a smile, a gasp)
+means it, and a line said meanwhile shows on the other joints; speech is above
+blinks and gaze because the mouth joint is its own. Joints no layer claims are
+not sent anything (the arm the children move while teaching stays limp and free).
+
+Every tick sends one `stream` step through the joints layer: its clamps, its speed
+limits (a jump between layers is slewed, never sent), its torque rules and
+latched faults. A fault, a pause or a stop calls cancel(): every layer ends at
+once and nothing more is sent until the game asks again.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import random
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import structlog
+
+from hal.clock import Clock
+from hal.errors import HalError
+from hal.servos.api import Fault, Pose
+from hal.servos.settings import ServoSettings
+from kasparctl.body.api import Gaze, GazeKind
+from kasparctl.body.behaviours import Behaviour, minimum_jerk
+from kasparctl.body.mouth import Mouth
+from kasparctl.config import BodySettings
+
+log = structlog.get_logger("kasparctl.body")
+
+# Seconds a gaze shift takes (slower if a joint's speed limit says so).
+GAZE_MOVE_S = 0.6
+BLINK = "blink"
+IDLE = "idle"
+
+
+class StreamingServos(Protocol):
+    """What the body needs of the servos (hal.servos.joints.Joints gives it)."""
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        """Every configured joint."""
+        ...
+
+    def commanded(self) -> dict[str, float]:
+        """The last goal of every joint whose torque is on."""
+        ...
+
+    async def stream(self, pose: Pose, period: float) -> dict[str, float]:
+        """One control step toward `pose`, within every limit."""
+        ...
+
+    def on_fault(self, listener: Callable[[Fault], None]) -> None:
+        """Call `listener` with every newly latched fault."""
+        ...
+
+    def off_fault(self, listener: Callable[[Fault], None]) -> None:
+        """Stop calling `listener`."""
+        ...
+
+
+@dataclass(eq=False)
+class _Playback:
+    """A behaviour being played: from its first tick, offsets from `base`."""
+
+    behaviour: Behaviour
+    strength: float
+    done: asyncio.Future[None] | None = None
+    started: float | None = None
+    base: dict[str, float] = field(default_factory=dict)
+
+    def finish(self) -> None:
+        if self.done is not None and not self.done.done():
+            self.done.set_result(None)
+
+
+@dataclass
+class _GazeMove:
+    start: dict[str, float]
+    target: dict[str, float]
+    began: float | None = None
+
+
+class LiveBody:
+    """Kaspar's body language on the servos; satisfies kasparctl.body.api.Body."""
+
+    def __init__(
+        self,
+        servos: StreamingServos,
+        settings: BodySettings,
+        servo_settings: ServoSettings,
+        library: Mapping[str, Behaviour],
+        clock: Clock,
+        *,
+        latency_s: float = 0.0,
+        rng: random.Random | None = None,
+    ) -> None:
+        """The body of `servos` as `settings` say, playing behaviours of `library`.
+
+        `latency_s` is the player's output latency (the mouth waits as long);
+        `rng` draws the blink and idle intervals. Nothing moves until start().
+        """
+        self._servos = servos
+        self._settings = settings
+        self._library = dict(library)
+        self._clock = clock
+        self._rng = rng or random.Random()
+        self.period = 1.0 / settings.rate_hz
+        self._present = set(servos.joints)
+        rests = {j.name: j.rest_deg for j in servo_settings.joints}
+        mouth = settings.mouth_joint
+        self._mouth_joint = mouth if mouth and mouth in self._present else None
+        self._mouth_closed = rests.get(mouth, 0.0)
+        self.mouth = Mouth(clock, latency_s, settings.mouth_full_level, self.period)
+        self._alive = False
+        self._gesture: _Playback | None = None
+        self._blink: _Playback | None = None
+        self._idle: _Playback | None = None
+        self._gaze: _GazeMove | None = None
+        self._next_blink: float | None = None
+        self._next_idle: float | None = None
+        self._task: asyncio.Task[None] | None = None
+        self._noted: set[tuple[str, str]] = set()
+        self._fault_seen = False
+        # Set to a list to collect each tick's lateness in seconds (bench/bench_body_loop.py).
+        self.lateness: list[float] | None = None
+        # A latched fault ends every behaviour at once, loop running or not.
+        servos.on_fault(self._on_fault)
+
+    # --- the Body interface -------------------------------------------------------------
+
+    async def start(self) -> None:
+        """Begin the control loop; the body is not alive until set_alive(True)."""
+        if self._task is not None:
+            return
+        self._task = asyncio.get_running_loop().create_task(self._run(), name="body loop")
+
+    async def close(self) -> None:
+        """Cancel everything and stop the loop; idempotent."""
+        self.cancel()
+        self._servos.off_fault(self._on_fault)
+        task, self._task = self._task, None
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+
+    def set_alive(self, alive: bool) -> None:
+        """Allow or forbid blinks, idle movements and gaze (they end at once when forbidden)."""
+        self._alive = alive
+        if not alive:
+            self._blink = self._idle = self._gaze = None
+            self._next_blink = self._next_idle = None
+
+    def look_at(self, gaze: Gaze) -> None:
+        """Turn head and eyes to the configured pose for `gaze`, when alive; returns at once."""
+        if not self._alive:
+            return
+        target = {j: v for j, v in self._gaze_pose(gaze).items() if j in self._present}
+        if not target:
+            return
+        self._gaze = _GazeMove({}, target)
+
+    async def perform(self, behaviour: str, strength: float = 1.0) -> None:
+        """Play `behaviour` to its end (or until cancelled or replaced); never raises for it.
+
+        An unknown behaviour, or one played before start(), is logged once and skipped.
+        """
+        chosen = self._library.get(behaviour)
+        if chosen is None or self._task is None:
+            self._note_once(behaviour, "", "behaviour not played: "
+                            + ("unknown" if chosen is None else "the body is not started"))
+            return
+        playback = self.play(chosen, strength)
+        assert playback.done is not None
+        await asyncio.shield(playback.done)
+
+    def play(self, behaviour: Behaviour, strength: float = 1.0) -> _Playback:
+        """Start `behaviour` in the gesture layer now (replacing one playing); its playback."""
+        for joint in behaviour.joints:
+            if joint not in self._present:
+                self._note_once(behaviour.name, joint, "joint not on this robot: skipped")
+        if self._gesture is not None:
+            self._gesture.finish()
+        playback = _Playback(behaviour, strength, asyncio.get_running_loop().create_future())
+        self._gesture = playback
+        return playback
+
+    def cancel(self) -> None:
+        """End every layer at once: no goal is sent after this returns, until the game asks
+        again (set_alive(True), look_at, perform, or the next line's sound)."""
+        if self._gesture is not None:
+            self._gesture.finish()
+        self._gesture = self._blink = self._idle = self._gaze = None
+        self._alive = False
+        self._next_blink = self._next_idle = None
+        self.mouth.silence()
+
+    # --- the loop -----------------------------------------------------------------------
+
+    async def _run(self) -> None:
+        begin = self._clock.now()
+        tick = 0
+        while True:
+            tick += 1
+            due = begin + tick * self.period
+            delay = due - self._clock.now()
+            if delay < -self.period:  # far behind: start the schedule again, no burst
+                begin, tick = self._clock.now(), 0
+                delay = 0.0
+            await self._clock.sleep(max(0.0, delay))
+            now = self._clock.now()
+            if self.lateness is not None:
+                self.lateness.append(now - due)
+            await self.step(now)
+
+    async def step(self, now: float) -> dict[str, float]:
+        """One tick: blend the layers for `now` and send the goals; the goals sent."""
+        pose = self.compose(now)
+        if not pose:
+            return {}
+        try:
+            sent = await self._servos.stream(pose, self.period)
+        except HalError as error:
+            if not self._fault_seen:
+                log.warning("body paused: the servos refuse motion", error=str(error))
+                self._fault_seen = True
+            self.cancel()
+            return {}
+        self._fault_seen = False
+        return sent
+
+    def compose(self, now: float) -> dict[str, float]:
+        """The blended target of every claimed joint at `now` (layers by priority)."""
+        held = self._servos.commanded()
+        out: dict[str, float] = {}
+        if self._alive:
+            self._schedule_life(now)
+            self._gaze_layer(now, held, out)
+            if self._idle is not None:
+                self._idle = self._additive(self._idle, now, held, out)
+            if self._blink is not None:
+                self._blink = self._relative(self._blink, now, held, out)
+        if self._mouth_joint is not None and self._mouth_joint in held:
+            opening = self.mouth.opening(now)
+            if opening is not None:
+                span = self._settings.mouth_open_deg
+                out[self._mouth_joint] = self._mouth_closed + opening * span
+        if self._gesture is not None:
+            self._gesture = self._relative(self._gesture, now, held, out)
+        return {joint: value for joint, value in out.items() if joint in held}
+
+    def _schedule_life(self, now: float) -> None:
+        settings = self._settings
+        if self._next_blink is None:
+            self._next_blink = now + self._rng.uniform(*settings.blink_interval_s)
+        if self._next_idle is None:
+            self._next_idle = now + self._rng.uniform(*settings.idle_interval_s)
+        if now >= self._next_blink:
+            self._next_blink = None
+            if self._blink is None and BLINK in self._library:
+                self._blink = _Playback(self._library[BLINK], 1.0)
+        if now >= self._next_idle:
+            self._next_idle = None
+            if self._idle is None and IDLE in self._library and settings.idle_amplitude > 0:
+                self._idle = _Playback(self._library[IDLE], settings.idle_amplitude)
+
+    def _gaze_layer(self, now: float, held: Mapping[str, float], out: dict[str, float]) -> None:
+        move = self._gaze
+        if move is None:
+            return
+        if move.began is None:
+            move.began = now
+            move.start = {j: held[j] for j in move.target if j in held}
+        fraction = minimum_jerk((now - move.began) / GAZE_MOVE_S)
+        for joint, target in move.target.items():
+            start = move.start.get(joint)
+            if start is not None:
+                out[joint] = start + (target - start) * fraction
+
+    def _additive(
+        self, playback: _Playback, now: float, held: Mapping[str, float], out: dict[str, float]
+    ) -> _Playback | None:
+        """Offsets added to what the layers below want (else to where the joint was)."""
+        if playback.started is None:
+            playback.started = now
+            playback.base = {j: held[j] for j in playback.behaviour.joints if j in held}
+        elapsed = now - playback.started
+        for joint, offset in playback.behaviour.offsets(elapsed, playback.strength).items():
+            if joint in playback.base:
+                out[joint] = out.get(joint, playback.base[joint]) + offset
+        if elapsed >= playback.behaviour.duration:
+            playback.finish()
+            return None
+        return playback
+
+    def _relative(
+        self, playback: _Playback, now: float, held: Mapping[str, float], out: dict[str, float]
+    ) -> _Playback | None:
+        """Offsets from where each joint was (or was wanted) at the first tick; overrides."""
+        if playback.started is None:
+            playback.started = now
+            playback.base = {
+                j: out.get(j, held[j]) for j in playback.behaviour.joints if j in held
+            }
+        elapsed = now - playback.started
+        for joint, offset in playback.behaviour.offsets(elapsed, playback.strength).items():
+            if joint in playback.base:
+                out[joint] = playback.base[joint] + offset
+        if elapsed >= playback.behaviour.duration:
+            playback.finish()
+            return None
+        return playback
+
+    # --- helpers ------------------------------------------------------------------------
+
+    def _gaze_pose(self, gaze: Gaze) -> dict[str, float]:
+        table = self._settings.gaze
+        if gaze.kind is GazeKind.CHILD and 0 <= gaze.index < len(table.children):
+            return dict(table.children[gaze.index])
+        if gaze.kind is GazeKind.BAG and 0 <= gaze.index < len(table.bags):
+            return dict(table.bags[gaze.index])
+        if gaze.kind is GazeKind.RESEARCHER and table.researcher:
+            return dict(table.researcher)
+        return dict(table.ahead)
+
+    def _on_fault(self, fault: Fault) -> None:
+        self.cancel()
+
+    def _note_once(self, behaviour: str, joint: str, message: str) -> None:
+        if (behaviour, joint) not in self._noted:
+            self._noted.add((behaviour, joint))
+            log.info(message, behaviour=behaviour, joint=joint or None)
