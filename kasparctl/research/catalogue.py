@@ -31,7 +31,7 @@ from kasparctl.game.records import (
     UndoRecord,
 )
 from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
-from kasparctl.research.reader import Warnings, iter_records
+from kasparctl.research.reader import Warnings, is_utf8, iter_records
 
 # plan.json is a few hundred bytes; one far larger is not a plan, and is not read whole.
 MAX_PLAN_BYTES = 1 << 20
@@ -302,6 +302,8 @@ def read_plan(directory: Path) -> PlanFile:
     except msgspec.ValidationError as error:
         raise CatalogueError(f"{path}: {_validation_message(str(error))}") from None
     except msgspec.DecodeError as error:
+        if not is_utf8(data):
+            raise CatalogueError(f"{path}: not UTF-8 text") from None
         raise CatalogueError(f"{path}: not JSON ({error})") from None
     except UnicodeDecodeError:
         raise CatalogueError(f"{path}: not UTF-8 text") from None

@@ -87,12 +87,22 @@ def _lines(path: Path, warn: Warn) -> Iterator[tuple[int, bytes, bool]]:
         yield number + 1, pending, False
 
 
+def is_utf8(data: bytes) -> bool:
+    """Whether `data` is UTF-8 text: msgspec has reported bad bytes as a UnicodeDecodeError
+    and, in later releases, as a DecodeError, so a failed decode asks this directly."""
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return True
+
+
 def _why_not_json(line: bytes) -> str | None:
     """Why a line is not a JSON object, or None if it is one."""
     try:
         value = _plain.decode(line)
     except msgspec.DecodeError as error:
-        return str(error)
+        return str(error) if is_utf8(line) else "not UTF-8"
     except UnicodeDecodeError:
         return "not UTF-8"
     except RecursionError:
@@ -130,7 +140,7 @@ def _decode(line: bytes) -> tuple[AnyRecord | None, str | None, bool]:
         why = _why_not_json(line)
         return None, (str(error) if why is None else why), why is None
     except msgspec.DecodeError as error:
-        return None, str(error), False
+        return None, (str(error) if is_utf8(line) else "not UTF-8"), False
     except UnicodeDecodeError:
         # Valid JSON around bytes that are no UTF-8 text.
         return None, "not UTF-8", False
