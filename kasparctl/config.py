@@ -233,6 +233,22 @@ class GameSettings(_Settings, frozen=True):
         return self.exclude_learned_rule == "always"
 
 
+# How Kaspar shows how sure it is before each guess: "spoken" (the entropy's line, as in the
+# paper), "body" (its thinking behaviour and the way it points), "both", or "none".
+UncertaintyMode = Literal["spoken", "body", "both", "none"]
+UNCERTAINTY_MODES: tuple[UncertaintyMode, ...] = ("spoken", "body", "both", "none")
+# The modes in which Kaspar says it (speak_uncertainty = true).
+SPOKEN_MODES = ("spoken", "both")
+# A mode's word in the condition label "profile/word": "none" keeps the word sessions had
+# before modes ("silent"), so old and new sessions of one condition pool.
+CONDITION_LABELS: dict[str, str] = {
+    "spoken": "spoken",
+    "body": "body",
+    "both": "both",
+    "none": "silent",
+}
+
+
 class SessionPlan(_Settings, frozen=True):
     """A session planned beforehand: nobody can type during one."""
 
@@ -242,7 +258,15 @@ class SessionPlan(_Settings, frozen=True):
     profile: str = "paper"
     # The uncertainty script of this session (game.script when not given).
     script: Literal["paper", "varied"] | None = None
-    speak_uncertainty: bool = True
+    # How Kaspar shows how sure it is before each guess (UNCERTAINTY_MODES); not given,
+    # it follows speak_uncertainty (true: "spoken", false: "none"), else "spoken".
+    uncertainty: UncertaintyMode | None = None
+    # The older switch, still read: true is "spoken", false is "none". Given together with
+    # `uncertainty` it must agree with it (true with spoken or both, false with body or none).
+    speak_uncertainty: bool | None = None
+    # Gaze and life: Kaspar looks at the child whose turn it is, at the bag it points at and
+    # at the researcher, blinks and moves a little; false keeps all of it still this session.
+    alive: bool = True
     # First names are optional; without them Kaspar says "child one", "child two"...
     children: Annotated[
         tuple[Name, ...], msgspec.Meta(max_length=MAX_CHILDREN, extra={"item": "name"})
@@ -257,9 +281,34 @@ class SessionPlan(_Settings, frozen=True):
     answer_key: tuple[str, ...] = ()
 
     @property
+    def uncertainty_mode(self) -> UncertaintyMode:
+        """The uncertainty mode: `uncertainty`, else speak_uncertainty's, else "spoken"."""
+        if self.uncertainty is not None:
+            return self.uncertainty
+        return "none" if self.speak_uncertainty is False else "spoken"
+
+    @property
+    def says_uncertainty(self) -> bool:
+        """Whether Kaspar says how sure it is before each guess (spoken or both)."""
+        return self.uncertainty_mode in SPOKEN_MODES
+
+    @property
+    def shows_uncertainty(self) -> bool:
+        """Whether Kaspar's body shows how sure it is before each guess (body or both)."""
+        return self.uncertainty_mode in ("body", "both")
+
+    def resolved(self) -> SessionPlan:
+        """This plan with its uncertainty mode and speak_uncertainty both written out, as
+        plan.json keeps it (older readers read speak_uncertainty)."""
+        mode = self.uncertainty_mode
+        return msgspec.structs.replace(
+            self, uncertainty=mode, speak_uncertainty=mode in SPOKEN_MODES
+        )
+
+    @property
     def condition(self) -> str:
-        """The experimental condition, "profile/spoken" or "profile/silent"."""
-        return f"{self.profile}/{'spoken' if self.speak_uncertainty else 'silent'}"
+        """The experimental condition, "profile/<mode label>" (CONDITION_LABELS)."""
+        return f"{self.profile}/{CONDITION_LABELS[self.uncertainty_mode]}"
 
 
 class DaemonSettings(_Settings, frozen=True):
@@ -268,6 +317,45 @@ class DaemonSettings(_Settings, frozen=True):
     # After SIGTERM Kaspar goes to rest at each joint's speed limit, then either
     # holds there ("hold": no slump while the computer shuts down) or goes limp.
     stop_action: Literal["hold", "torque_off"] = "hold"
+
+
+class Direction(_Settings, frozen=True):
+    """Where Kaspar's head turns to look: yaw (+ to its left) and pitch (+ down), degrees
+    from looking straight ahead."""
+
+    yaw_deg: Annotated[float, msgspec.Meta(ge=-90.0, le=90.0, extra={"unit": "deg"})] = 0.0
+    pitch_deg: Annotated[float, msgspec.Meta(ge=-45.0, le=45.0, extra={"unit": "deg"})] = 0.0
+
+
+class GazeSettings(_Settings, frozen=True):
+    """The `[gaze]` table: where the children sit, the bags lie and the researcher stands,
+    as seen from Kaspar's head (the body turns its head and eyes there)."""
+
+    # One direction per seat, in turn order: child 1 sits at seats[0]...
+    seats: tuple[Direction, ...] = (
+        Direction(yaw_deg=30.0, pitch_deg=5.0),
+        Direction(yaw_deg=0.0, pitch_deg=5.0),
+        Direction(yaw_deg=-30.0, pitch_deg=5.0),
+    )
+    # One direction per target (bag, or pilot location), in target order; a target
+    # without one is looked at on the table in front (`table`).
+    bags: tuple[Direction, ...] = ()
+    table: Direction = Direction(pitch_deg=20.0)
+    researcher: Direction = Direction(yaw_deg=-60.0)
+    ahead: Direction = Direction()
+
+    def direction(self, kind: str, index: int = 0) -> Direction:
+        """Where to look for a gaze target (kasparctl.body.api.Gaze's kind and index).
+
+        A child beyond the configured seats is looked for straight ahead.
+        """
+        if kind == "child":
+            return self.seats[index] if 0 <= index < len(self.seats) else self.ahead
+        if kind == "bag":
+            return self.bags[index] if 0 <= index < len(self.bags) else self.table
+        if kind == "researcher":
+            return self.researcher
+        return self.ahead
 
 
 class Config(_Settings, frozen=True):
@@ -293,6 +381,7 @@ class Config(_Settings, frozen=True):
     researcher: ResearcherSettings = ResearcherSettings()
     voice: VoiceSettings = VoiceSettings()
     daemon: DaemonSettings = DaemonSettings()
+    gaze: GazeSettings = GazeSettings()
 
     def profile(self, name: str | None = None) -> LearnerParams:
         """A profile's learner (the default profile's without a name); KeyError if unknown."""
@@ -551,7 +640,8 @@ def _explain_validation_error(text: str, raw: dict[str, Any]) -> tuple[str, str]
         message = f"expected one of {choices}, found {bad_choice.group(1)}"
     got = re.fullmatch(r"Expected `(.+)`, got `(.+)`", message)
     if got:
-        message = f"expected {got.group(1)}, found {got.group(2)}"
+        # TOML has no null: a key that may be left out is not "bool | null" to its reader.
+        message = f"expected {got.group(1).removesuffix(' | null')}, found {got.group(2)}"
     constraint = _CONSTRAINT.match(message)
     if constraint:
         message = _explain_constraint(constraint, field_type, value)
@@ -727,6 +817,18 @@ def _validate(config: Config, source: str) -> None:
     _check_sessions(config, fail)
     _check_researcher(config, fail)
     _check_interaction(config.game, fail)
+    _check_gaze(config, fail)
+
+
+def _check_gaze(config: Config, fail: _Fail) -> None:
+    """At most one bag direction per target."""
+    targets = config.game.targets
+    if len(config.gaze.bags) > len(targets):
+        fail(
+            "gaze.bags",
+            f"expected at most {len(targets)} directions (one per target: "
+            f"{', '.join(targets) or 'none'}), found {len(config.gaze.bags)}",
+        )
 
 
 def _check_learner(learner: LearnerSettings, fail: _Fail) -> None:
@@ -859,6 +961,20 @@ def _check_plan(plan: SessionPlan, where: str, config: Config, fail: _Fail) -> N
             )
     if plan.answer_key:
         _check_answer_key(plan.answer_key, config.game, f"{where}.answer_key", fail)
+    _check_uncertainty(plan, where, fail)
+
+
+def _check_uncertainty(plan: SessionPlan, where: str, fail: _Fail) -> None:
+    """speak_uncertainty, the older key, may stand beside `uncertainty` only if they agree."""
+    mode, spoken = plan.uncertainty, plan.speak_uncertainty
+    if mode is None or spoken is None or spoken == (mode in SPOKEN_MODES):
+        return
+    agreeing = "true" if mode in SPOKEN_MODES else "false"
+    fail(
+        f"{where}.speak_uncertainty",
+        f"expected {agreeing} to agree with uncertainty = {mode!r} (or leave it out: "
+        f"uncertainty says it all), found {str(spoken).lower()}",
+    )
 
 
 GESTURES = ("long green", "long red", "double green", "double red", "both")
