@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, TextIO, cast
 
 from kasparctl.commands.arguments import PROBABILITY, UsageError, number, seed, stdin_readable
-from kasparctl.config import Config, ConfigError, load_config
+from kasparctl.config import UNCERTAINTY_MODES, Config, ConfigError, load_config
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.phrases import PhraseError
 from kasparctl.game.session import SessionError
@@ -68,6 +68,13 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--config", default=None, help="kaspar.toml (default: the demo robot)")
     parser.add_argument("--variant", choices=("names", "pilot"), default=None)
+    parser.add_argument(
+        "--uncertainty",
+        choices=UNCERTAINTY_MODES,
+        default=None,
+        help="how Kaspar shows how sure it is: said, by its body, both or neither "
+        "(default: the session plan's; a resumed session keeps its own)",
+    )
     parser.add_argument("--p-wrong-green", type=PROBABILITY, default=0.0)
     parser.add_argument("--p-wrong-red", type=PROBABILITY, default=0.0)
     parser.add_argument("--p-no-answer", type=PROBABILITY, default=0.0)
@@ -147,6 +154,7 @@ def run(arguments: argparse.Namespace) -> int:
         think_s=think_s,
         messiness=messiness,
         interactive=arguments.interactive,
+        uncertainty=arguments.uncertainty,
         # A reader that goes away (`| head`) ends the demo, quietly (exit 0).
         out=cast(TextIO, Transcript(sys.stdout)),
     )
