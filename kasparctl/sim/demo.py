@@ -275,17 +275,22 @@ class DemoRig(Generic[ServosT]):
 
 
 def build(
-    config: Config, options: DemoOptions, children_answers: list[int] | None = None
+    config: Config,
+    options: DemoOptions,
+    children_answers: list[int] | None = None,
+    *,
+    body: Body | None = None,
 ) -> DemoRig[SimServos]:
     """Assemble the simulated robot and (or resume) a session in options.state_dir.
 
     `children_answers` makes the simulated children believe other answers than
-    the plan's answer key (to show the learner does not see the key).
+    the plan's answer key (to show the learner does not see the key); `body` is
+    Kaspar's body language (None: a StillBody).
     """
     clock = LoopClock()
     servos = SimServos(config.servos, clock)
     voice = SimVoice(options.out, clock, clips=config.voice.clips)
-    return assemble(config, options, servos, voice, children_answers)
+    return assemble(config, options, servos, voice, children_answers, body=body)
 
 
 def assemble(
@@ -537,7 +542,7 @@ def body_note(info: dict[str, Any]) -> str | None:
         if behaviour == "thinking":
             note += _how_hard(float(info["strength"]))
         return note
-    if kind == "look" and info.get("gaze") != "bag":  # the point says where it looks
+    if kind == "look" and info.get("gaze") == "child":  # whose turn; the point says the bag
         return f"Kaspar looks at {info['name']}" if info.get("name") else None
     return None  # life on and off is too small a thing to print
 
