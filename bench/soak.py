@@ -111,6 +111,12 @@ def check_game(directory: Path) -> dict[str, Any]:
     out["violations"] = [e for e in ledger if e["event"] == "violation"]
     sessions = sorted((directory / "state" / "sessions").glob("*"))
     out["sessions"] = len(sessions)
+    # The uncertainty mode the game played (its body's thinking and points in body and both).
+    out["uncertainty"] = None
+    for session in sessions:
+        plan_path = session / "plan.json"
+        if plan_path.exists():
+            out["uncertainty"] = json.loads(plan_path.read_text()).get("uncertainty")
     if len(sessions) != 1:
         out["problems"].append(f"{len(sessions)} sessions, expected 1")
     records: list[dict[str, Any]] = []
@@ -178,6 +184,7 @@ def analyse(root: Path) -> dict[str, Any]:
         "finished": finished,
         "stopped_by_researcher": stopped,
         "trials": sum(g["trials"] for g in games),
+        "uncertainty_modes": dict(Counter(str(g["uncertainty"]) for g in games)),
         "trials_lost": sum(g["trials_lost"] for g in games),
         "trials_duplicated": sum(g["trials_duplicated"] for g in games),
         "torn_lines_repaired": sum(g["torn"] for g in games),
@@ -237,6 +244,8 @@ def print_report(report: dict[str, Any]) -> None:
           f"({rate:.0f} games/min), state in {report['state_root']}")
     print(f"  finished {report['finished']}, stopped by the researcher "
           f"{report['stopped_by_researcher']}, trials {report['trials']}")
+    modes = ", ".join(f"{mode} {n}" for mode, n in sorted(report["uncertainty_modes"].items()))
+    print(f"  games by uncertainty mode: {modes}")
     print(f"  crashes {report['crashes']} (worker {len(report['worker_crashes'])}, software faults "
           f"{report['software_faults']}), worker restarts after SIGKILL "
           f"{report['worker_restarts_after_sigkill']}")

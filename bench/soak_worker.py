@@ -33,7 +33,8 @@ from soak_rig import (  # noqa: E402
 
 from hal.clock import LoopClock  # noqa: E402
 from hal.voice.speaker import Voice  # noqa: E402
-from kasparctl.config import Config  # noqa: E402
+from kasparctl.body.api import Body, StillBody  # noqa: E402
+from kasparctl.config import UNCERTAINTY_MODES, Config  # noqa: E402
 from kasparctl.game.session import RECORDS_FILE, find_unfinished, read_json_lines, write_atomic  # noqa: E402
 from kasparctl.log import configure_logging  # noqa: E402
 from kasparctl.sim import simtime  # noqa: E402
@@ -51,10 +52,28 @@ STALL_LIMIT_S = 2 * 3600.0
 
 
 def soak_config(game: int) -> Config:
-    """The demo robot, playing the names game or (every other game) the pilot."""
+    """The demo robot, playing the names game or (every other game) the pilot, each game in
+    the next uncertainty mode (spoken, body, both, none: the body's thinking, its hesitant
+    and quick points and nods in two games of four)."""
     config = with_variant(demo_config(), "pilot" if game % 2 else "names")
     servos = msgspec.structs.replace(config.servos, poll_interval_s=POLL_INTERVAL_S)
-    return msgspec.structs.replace(config, servos=servos)
+    mode = UNCERTAINTY_MODES[game % len(UNCERTAINTY_MODES)]
+    plans = tuple(
+        msgspec.structs.replace(plan, uncertainty=mode, speak_uncertainty=None)
+        for plan in config.sessions
+    )
+    return msgspec.structs.replace(config, servos=servos, sessions=plans)
+
+
+def soak_body(config: Config) -> Body:
+    """Kaspar's body language in the soak: every behaviour the game asks for is asked of it.
+
+    A StillBody until the body engine is wired here (kasparctl.body's factory, on the
+    same emulated servos): the game's side of it (thinking, the points by uncertainty,
+    gaze and life, the cancellations) runs either way.
+    """
+    del config
+    return StillBody()
 
 
 def game_seed(seed: int, game: int) -> int:
@@ -82,7 +101,7 @@ async def play(game: int, directory: Path, seed: int, faults: int, ledger: Ledge
         options = DemoOptions(
             state_dir=directory / "state", seed=game_seed(seed, game), out=io.StringIO()
         )
-        rig = assemble(config, options, servos, voice, patience=PATIENCE)
+        rig = assemble(config, options, servos, voice, patience=PATIENCE, body=soak_body(config))
         watch = StateWatch()
         watch.resumed.append(lambda: ledger.write(event="resumed", wall=time.time()))
         rig.game.listeners.append(watch)

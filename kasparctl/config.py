@@ -234,6 +234,22 @@ class GameSettings(_Settings, frozen=True):
         return self.exclude_learned_rule == "always"
 
 
+# How Kaspar shows how sure it is before each guess: "spoken" (the entropy's line, as in the
+# paper), "body" (its thinking behaviour and the way it points), "both", or "none".
+UncertaintyMode = Literal["spoken", "body", "both", "none"]
+UNCERTAINTY_MODES: tuple[UncertaintyMode, ...] = ("spoken", "body", "both", "none")
+# The modes in which Kaspar says it (speak_uncertainty = true).
+SPOKEN_MODES = ("spoken", "both")
+# A mode's word in the condition label "profile/word": "none" keeps the word sessions had
+# before modes ("silent"), so old and new sessions of one condition pool.
+CONDITION_LABELS: dict[str, str] = {
+    "spoken": "spoken",
+    "body": "body",
+    "both": "both",
+    "none": "silent",
+}
+
+
 class SessionPlan(_Settings, frozen=True):
     """A session planned beforehand: nobody can type during one."""
 
@@ -243,7 +259,15 @@ class SessionPlan(_Settings, frozen=True):
     profile: str = "paper"
     # The uncertainty script of this session (game.script when not given).
     script: Literal["paper", "varied"] | None = None
-    speak_uncertainty: bool = True
+    # How Kaspar shows how sure it is before each guess (UNCERTAINTY_MODES); not given,
+    # it follows speak_uncertainty (true: "spoken", false: "none"), else "spoken".
+    uncertainty: UncertaintyMode | None = None
+    # The older switch, still read: true is "spoken", false is "none". Given together with
+    # `uncertainty` it must agree with it (true with spoken or both, false with body or none).
+    speak_uncertainty: bool | None = None
+    # Gaze and life: Kaspar looks at the child whose turn it is, at the bag it points at and
+    # at the researcher, blinks and moves a little; false keeps all of it still this session.
+    alive: bool = True
     # First names are optional; without them Kaspar says "child one", "child two"...
     children: Annotated[
         tuple[Name, ...], msgspec.Meta(max_length=MAX_CHILDREN, extra={"item": "name"})
@@ -258,9 +282,34 @@ class SessionPlan(_Settings, frozen=True):
     answer_key: tuple[str, ...] = ()
 
     @property
+    def uncertainty_mode(self) -> UncertaintyMode:
+        """The uncertainty mode: `uncertainty`, else speak_uncertainty's, else "spoken"."""
+        if self.uncertainty is not None:
+            return self.uncertainty
+        return "none" if self.speak_uncertainty is False else "spoken"
+
+    @property
+    def says_uncertainty(self) -> bool:
+        """Whether Kaspar says how sure it is before each guess (spoken or both)."""
+        return self.uncertainty_mode in SPOKEN_MODES
+
+    @property
+    def shows_uncertainty(self) -> bool:
+        """Whether Kaspar's body shows how sure it is before each guess (body or both)."""
+        return self.uncertainty_mode in ("body", "both")
+
+    def resolved(self) -> SessionPlan:
+        """This plan with its uncertainty mode and speak_uncertainty both written out, as
+        plan.json keeps it (older readers read speak_uncertainty)."""
+        mode = self.uncertainty_mode
+        return msgspec.structs.replace(
+            self, uncertainty=mode, speak_uncertainty=mode in SPOKEN_MODES
+        )
+
+    @property
     def condition(self) -> str:
-        """The experimental condition, "profile/spoken" or "profile/silent"."""
-        return f"{self.profile}/{'spoken' if self.speak_uncertainty else 'silent'}"
+        """The experimental condition, "profile/<mode label>" (CONDITION_LABELS)."""
+        return f"{self.profile}/{CONDITION_LABELS[self.uncertainty_mode]}"
 
 
 class DaemonSettings(_Settings, frozen=True):
@@ -617,7 +666,8 @@ def _explain_validation_error(text: str, raw: dict[str, Any]) -> tuple[str, str]
         message = f"expected one of {choices}, found {bad_choice.group(1)}"
     got = re.fullmatch(r"Expected `(.+)`, got `(.+)`", message)
     if got:
-        message = f"expected {got.group(1)}, found {got.group(2)}"
+        # TOML has no null: a key that may be left out is not "bool | null" to its reader.
+        message = f"expected {got.group(1).removesuffix(' | null')}, found {got.group(2)}"
     constraint = _CONSTRAINT.match(message)
     if constraint:
         message = _explain_constraint(constraint, field_type, value)
@@ -918,6 +968,13 @@ def _check_body(config: Config, fail: _Fail) -> None:
             check_pose(pose, key, config.servos, "")
         except ConfigError as error:
             fail(f"body.gaze.{error.key}", error.message)
+    targets = config.game.targets
+    if len(gaze.bags) > len(targets):
+        fail(
+            "body.gaze.bags",
+            f"expected at most {len(targets)} poses (one per target: "
+            f"{', '.join(targets) or 'none'}), found {len(gaze.bags)}",
+        )
 
 
 def _check_pointing_group(config: Config, fail: _Fail) -> None:
@@ -967,6 +1024,20 @@ def _check_plan(plan: SessionPlan, where: str, config: Config, fail: _Fail) -> N
             )
     if plan.answer_key:
         _check_answer_key(plan.answer_key, config.game, f"{where}.answer_key", fail)
+    _check_uncertainty(plan, where, fail)
+
+
+def _check_uncertainty(plan: SessionPlan, where: str, fail: _Fail) -> None:
+    """speak_uncertainty, the older key, may stand beside `uncertainty` only if they agree."""
+    mode, spoken = plan.uncertainty, plan.speak_uncertainty
+    if mode is None or spoken is None or spoken == (mode in SPOKEN_MODES):
+        return
+    agreeing = "true" if mode in SPOKEN_MODES else "false"
+    fail(
+        f"{where}.speak_uncertainty",
+        f"expected {agreeing} to agree with uncertainty = {mode!r} (or leave it out: "
+        f"uncertainty says it all), found {str(spoken).lower()}",
+    )
 
 
 GESTURES = ("long green", "long red", "double green", "double red", "both")

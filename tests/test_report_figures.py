@@ -52,7 +52,7 @@ def synthetic(conditions: int, label_length: int, children: int = 0) -> FigureDa
     toys = tuple(f"toy number {i}" for i in range(6))
     for index in range(conditions):
         label = f"profile-{index}-" + "x" * label_length + ("/spoken" if index % 2 else "/silent")
-        condition = Condition(label, Factors(f"p{index}", bool(index % 2), "names"))
+        condition = Condition(label, Factors(f"p{index}", "spoken" if index % 2 else "none", "names"))
         for cluster in range(5):
             for target in range(6):
                 length = int(rng.integers(2, 25))

@@ -364,7 +364,7 @@ def problem(cluster: str, trials: int) -> Problem:
 
 
 def condition_of(problems: list[Problem]) -> Condition:
-    condition = Condition("c", Factors("paper", True, "pilot"), problems=problems)
+    condition = Condition("c", Factors("paper", "spoken", "pilot"), problems=problems)
     condition.feedback_by_cluster = {p.cluster: Feedback() for p in problems}
     return condition
 

@@ -262,6 +262,8 @@ def test_records_hold_no_personal_data_beyond_the_plan(
         "script",
         "profile",
         "speak_uncertainty",
+        "uncertainty",
+        "alive",
         "children",
         "participants",
         "group_size",

@@ -44,6 +44,8 @@ def test_a_short_soak_meets_every_target_with_every_fault_kind(short_soak: dict)
     assert report["worker_restarts_after_sigkill"] >= 1
     assert report["goals_checked"] > 1000  # the monitor saw the arm move
     assert report["trials"] > 0 and report["finished"] >= 1
+    # Behaviours on: every uncertainty mode played, the body's thinking and points among them.
+    assert set(report["uncertainty_modes"]) == {"spoken", "body", "both", "none"}
 
 
 def test_the_motion_monitor_flags_a_goal_outside_the_range_and_a_jump() -> None:

@@ -27,7 +27,7 @@ from kasparctl.commands.arguments import (
     seed,
     stdin_readable,
 )
-from kasparctl.config import Config, ConfigError, load_config
+from kasparctl.config import UNCERTAINTY_MODES, Config, ConfigError, load_config
 from kasparctl.game.language import with_language
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.phrases import PhraseError
@@ -82,6 +82,13 @@ def register(subparsers: Any) -> None:
         default=None,
         metavar="L",
         help="Kaspar speaks L (en, nl, de, it, fr): its phrases, toys and voice",
+    )
+    parser.add_argument(
+        "--uncertainty",
+        choices=UNCERTAINTY_MODES,
+        default=None,
+        help="how Kaspar shows how sure it is: said, by its body, both or neither "
+        "(default: the session plan's; a resumed session keeps its own)",
     )
     parser.add_argument("--p-wrong-green", type=PROBABILITY, default=0.0)
     parser.add_argument("--p-wrong-red", type=PROBABILITY, default=0.0)
@@ -164,6 +171,7 @@ def run(arguments: argparse.Namespace) -> int:
         think_s=think_s,
         messiness=messiness,
         interactive=arguments.interactive,
+        uncertainty=arguments.uncertainty,
         # A reader that goes away (`| head`) ends the demo, quietly (exit 0).
         out=cast(TextIO, Transcript(sys.stdout)),
     )

@@ -21,7 +21,7 @@ from typing import Any, BinaryIO
 
 from kasparctl.game.phrases import PhraseError, load_phrasebook
 from kasparctl.research.children import Children
-from kasparctl.research.conditions import CLUSTER_UNITS, by_condition, pooled
+from kasparctl.research.conditions import CLUSTER_UNITS, by_condition, by_uncertainty, pooled
 from kasparctl.research.figures import FigureData, FiguresUnavailable, draw_all, require_matplotlib
 from kasparctl.research.inference import (
     DEFAULT_REPLICATES,
@@ -152,6 +152,7 @@ def run(arguments: argparse.Namespace) -> int:
             contrasts,
             list(joined(coded_only=True)),
             arguments.participants,
+            by_uncertainty(conditions),
         )
         summary["figures"] = drawn.names
         summary["notes"] = drawn.notes

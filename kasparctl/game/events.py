@@ -25,7 +25,10 @@ class GameEvent(enum.StrEnum):
     ASKING = "asking"
     # bag, round, mover, presser: Kaspar has asked for bag's pose (from 0) and waits.
     TEACH = "teach"
-    POINT = "point"  # target: the name Kaspar points at
+    POINT = "point"  # target: the name Kaspar points at; style: "slowly, hesitating"...
+    # What the game asked of Kaspar's body (kasparctl.game.bodywork): kind "look" (gaze,
+    # index, name), "perform" (behaviour, strength) or "alive" (alive).
+    BODY = "body"
     # target, choice (indices), trial, child: the question is finished, Kaspar listens.
     QUESTION = "question"
     LISTENING = "listening"  # (none): Kaspar shows it listens (its pose, its sound)

@@ -53,8 +53,22 @@ from hal.errors import HalError
 from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import ANSWERS_ONLY, Gesture, GestureKind
 from hal.servos.api import Fault
+from kasparctl.body.api import Body, GazeKind
 from kasparctl.config import Config, SessionPlan
 from kasparctl.game import recovery
+from kasparctl.game.bodywork import (
+    FAREWELL,
+    GREETING,
+    HAPPY,
+    NOD,
+    PLAIN_POINT,
+    SAD,
+    THINKING,
+    BodyWork,
+    PointStyle,
+    point,
+    point_style,
+)
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.presses import ChildPresses, Press
@@ -185,7 +199,8 @@ def planned(config: Config, plan: SessionPlan, seed: int | None) -> dict[str, An
         "language": config.language,
         # Confusion noticed, names re-opened (kasparctl.game.recovery); absent before.
         "recovery": recovery.RECOVERY_VERSION,
-        "plan": msgspec.to_builtins(plan),
+        "uncertainty": plan.uncertainty_mode,
+        "plan": msgspec.to_builtins(plan.resolved()),
         # Frozen at the start: a resume uses these, whatever the configuration says then.
         "learner": frozen_learner(plan.profile, config.profile(plan.profile)),
     }
@@ -242,6 +257,7 @@ class Game:
         startup_faults: Sequence[HardwareFault] = (),
         known_problems: Mapping[FaultSource, str] | None = None,
         unwritten: Sequence[tuple[Session | EventLog, Record, float]] = (),
+        body: Body | None = None,
     ) -> None:
         """A game that opens its session with `open_session` at the start, or resumes `resumed`.
 
@@ -256,12 +272,17 @@ class Game:
         itself reports KeyfobLost when it is not there at its start; an earlier game
         may have taken that report, hence these. `unwritten` are records an earlier
         game kept when the disk refused them (its `unwritten`): written first, in order.
+        `body` shows Kaspar's gaze, life and behaviours (none: a StillBody, and the
+        game's own happy and sad poses).
         """
         self.config = config
         self.settings = config.game
         self.hw = hardware
         self.picker = picker
         self.speech = Speech(picker, hardware.voice, self._record, self._voice_health)
+        self.body = BodyWork(
+            body, lambda: self.plan, lambda info: self._emit(GameEvent.BODY, **info)
+        )
         self.event_log = event_log
         self._startup_faults = tuple(startup_faults)
         # What is not working now, by part: shown by the daemon, cleared as each comes back.
@@ -578,6 +599,7 @@ class Game:
             await self.speech.announce("fault.problem")
             return
         applied = msgspec.structs.replace(given, applied=True, confirm=key)
+        self.body.look_at(GazeKind.RESEARCHER, name="the researcher")
         if key is Confirmation.CLOSE:
             try:
                 self._close_stopped(applied)
@@ -608,6 +630,7 @@ class Game:
         if opens_session:
             self._write(applied)  # "start" opens the session: its command is its first record
         if key is Confirmation.STOP:
+            self.body.cancel()
             # To rest at once, saying goodbye on the way: safety does not wait for words,
             # and a line that fails does not keep Kaspar from resting.
             outcomes = await asyncio.gather(
@@ -648,7 +671,7 @@ class Game:
         )
         self._emit(GameEvent.SESSION, session=session.id)
         # The children may be new to Kaspar today: the greeting first, as at any start.
-        await self.speech.announce("session.greeting")
+        await asyncio.gather(self.speech.announce("session.greeting"), self.body.perform(GREETING))
 
     def _close_stopped(self, command: CommandRecord) -> None:
         """The stopped session is closed for good: its plan is done."""
@@ -718,6 +741,8 @@ class Game:
             self._said_in_fault = set()  # what was said about the last stop is no news now
         bind_context(step=stage)
         self._emit(GameEvent.STATE, state=stage)
+        # Life in every stage but a fault and the end (teaching and pointing say so too).
+        self.body.set_alive(stage not in ("fault", *ENDS))
         state = self.session_state
         if stage in ENDS:
             # The session ends whatever the disk says: a stop must never wait for it.
@@ -761,6 +786,7 @@ class Game:
         task, self._step_task = self._step_task, None
         if task is not None and not task.done():
             self.speech.cut()
+            self.body.cancel()
             # wait(), not `await task`: the step's own CancelledError stays inside it,
             # while a cancellation of this task (the daemon stopping) still gets through.
             # Again and again: a library that swallowed the cancellation (as wait_for can
@@ -796,6 +822,7 @@ class Game:
     async def _on_fault(self, fault: HardwareFault) -> None:
         """Record, log, show and say a fault; stop the running step where the kind stops it."""
         stage = self.stage
+        self.body.cancel()  # whatever Kaspar's body was doing ends at once, safely
         if fault.kind is FaultSource.STORAGE:
             self._storage_fault_queued = False
             if isinstance(fault.error, StorageFailed):
@@ -860,7 +887,7 @@ class Game:
 
     async def _step_placing(self) -> None:
         # The greeting first: the researcher's start has no words of its own.
-        await self.speech.say("session.greeting")
+        await self._greet()
         await self.speech.say("steps.place_bags", bags=str(len(self.settings.targets)))
         await self._wait_for_researcher("placing")
 
@@ -884,11 +911,13 @@ class Game:
         if state.teach_round == 0 and state.teach_bag == 0:
             await self.speech.say("steps.teach_pointing")
             await self.speech.say("instructions.teach")
+        self.body.set_alive(False)  # no gaze or idle while the children move the arm
         await self.hw.servos.set_compliant(group, True)
         try:
             while state.teach_round < self._group_size():
                 await self._teach_one_bag(state.teach_bag, state.teach_round, group)
         finally:
+            self.body.set_alive(True)
             # Torque back on holding where the arm is, also on pause or fault. If the
             # arm was left outside its safe range this fails, and the step fails
             # into the fault state: the researcher moves the arm back and resumes.
@@ -990,7 +1019,7 @@ class Game:
         if state.trials == 0:
             if self.settings.variant == "pilot":
                 # The pilot starts here: the greeting first.
-                await self.speech.say("session.greeting")
+                await self._greet()
                 await self.speech.say("steps.pilot")
             else:
                 await self.speech.say("steps.guessing")
@@ -1003,8 +1032,12 @@ class Game:
         if all(p.learned is not None for p in state.progress):
             pilot = self.settings.variant == "pilot"
             await self.speech.say("react.all_learned_pilot" if pilot else "react.all_learned")
-        await self.speech.say("session.thanks")
+        await asyncio.gather(self.speech.say("session.thanks"), self.body.perform(FAREWELL))
         await self.hw.servos.rest()
+
+    async def _greet(self) -> None:
+        """Hello, said and shown together."""
+        await asyncio.gather(self.speech.say("session.greeting"), self.body.perform(GREETING))
 
     # -- one guess --------------------------------------------------------------
 
@@ -1019,6 +1052,7 @@ class Game:
         self._record(question_record(plan))  # history only: the open question, for readers
         # From here a press is early, until the guess itself is said.
         answer = self.presses.open(self._now())
+        self.body.look_at(GazeKind.CHILD, plan.child_index, plan.child)
         self._emit(
             GameEvent.ASKING,
             target=plan.target,
@@ -1101,21 +1135,38 @@ class Game:
         """
         spoken: list[str] = []
         key = plan.uncertainty_line
+        strength = self.body.strength(plan.entropy, len(plan.candidates))
+        style = point_style(strength)
         if key is not None:
-            said, _ = await asyncio.gather(self.speech.say(key), self._point_at(plan.target_name))
+            said, _ = await asyncio.gather(
+                self.speech.say(key), self._think_and_point(plan, strength, style)
+            )
             spoken.append(said)
         else:
-            await self._point_at(plan.target_name)
+            await self._think_and_point(plan, strength, style)
         self.presses.last_words(self._now())
+        self.body.look_at(GazeKind.CHILD, plan.child_index, plan.child)
         if self.settings.variant == "pilot":
-            spoken.append(
-                await self.speech.say(
-                    "guess.pilot", child=plan.child, toy=plan.toy, where=self._where(plan)
-                )
+            guess = self.speech.say(
+                "guess.pilot", child=plan.child, toy=plan.toy, where=self._where(plan)
             )
         else:
-            spoken.append(await self.speech.say("guess.names", child=plan.child, toy=plan.toy))
+            guess = self.speech.say("guess.names", child=plan.child, toy=plan.toy)
+        if style.nod:
+            # Sure: a nod as it asks.
+            said, _ = await asyncio.gather(guess, self.body.perform(NOD, 1.0 - (strength or 0.0)))
+            spoken.append(said)
+        else:
+            spoken.append(await guess)
         return tuple(spoken)
+
+    async def _think_and_point(
+        self, plan: TrialPlan, strength: float | None, style: PointStyle
+    ) -> None:
+        """Thinking first, as hard as Kaspar is unsure, where the body shows it; then the point."""
+        if strength is not None:
+            await self.body.perform(THINKING, strength)
+        await self._point_at(plan.target_name, plan.target, style)
 
     def _where(self, plan: TrialPlan) -> str:
         """How the pilot location of `plan` is said in a sentence ("on the shelf")."""
@@ -1172,14 +1223,19 @@ class Game:
         # Face and words together; gather cancels both with the step and retrieves a
         # servo error from either, so none is left unheard.
         await asyncio.gather(
-            self.speech.say(key, **values), self._face(listened, dict(expression))
+            self.speech.say(key, **values),
+            self._face(listened, dict(expression), HAPPY if green else SAD),
         )
 
-    async def _face(self, listened: dict[str, float] | None, expression: dict[str, float]) -> None:
-        """Back from listening, then the expression (held briefly, then undone)."""
+    async def _face(
+        self, listened: dict[str, float] | None, expression: dict[str, float], behaviour: str
+    ) -> None:
+        """Back from listening, then the body's behaviour; without a body, the expression
+        pose (held briefly, then undone)."""
         if listened:
             await self.hw.servos.move(listened, duration=LISTEN_MOVE_S)
-        if expression:
+        await self.body.perform(behaviour)
+        if expression and self.body.fallback:
             await self._express(expression)
 
     async def _express(self, pose: dict[str, float]) -> None:
@@ -1202,12 +1258,19 @@ class Game:
         await self.hw.servos.move(dict(pose), duration=LISTEN_MOVE_S)
         return {joint: before[joint] for joint in pose if joint in before}
 
-    async def _point_at(self, target_name: str) -> None:
+    async def _point_at(
+        self, target_name: str, target: int, style: PointStyle = PLAIN_POINT
+    ) -> None:
         state = self._require_state()
         pose = state.poses.get(target_name) or self.settings.poses.get(target_name)
         if pose:
-            self._emit(GameEvent.POINT, target=target_name)
-            await self.hw.servos.move(pose, duration=1.0)
+            self._emit(GameEvent.POINT, target=target_name, style=style.words)
+            self.body.look_at(GazeKind.BAG, target, target_name)
+            self.body.set_alive(False)  # the head stays on the bag while the arm moves
+            try:
+                await point(self.hw.servos, pose, style)
+            finally:
+                self.body.set_alive(True)
 
     # -- waiting for children ---------------------------------------------------
 

@@ -95,7 +95,7 @@ def plan_trial(
     rng.bit_generator.state = state.learner.rng.bit_generator.state
     choice = choose(probabilities, rng)
     offered = int(candidates.sum())
-    band = script.level(entropy, offered) if session_plan.speak_uncertainty else None
+    band = script.level(entropy, offered) if session_plan.says_uncertainty else None
     progress = state.progress[target]
     confirmed = progress.streak > 0 and progress.streak_label == choice
     return TrialPlan(

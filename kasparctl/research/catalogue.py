@@ -22,6 +22,7 @@ from pathlib import Path
 
 import msgspec
 
+from kasparctl.config import CONDITION_LABELS, SPOKEN_MODES
 from kasparctl.game.records import (
     AnyRecord,
     SessionEvent,
@@ -48,7 +49,9 @@ class PlanEntry(msgspec.Struct, kw_only=True, frozen=True):
 
     group: str = ""
     profile: str = "paper"
-    speak_uncertainty: bool = True
+    # Sessions recorded before uncertainty modes have only speak_uncertainty.
+    uncertainty: str | None = None
+    speak_uncertainty: bool | None = None
     children: tuple[str, ...] = ()
     participants: tuple[str, ...] = ()
     group_size: int | None = None
@@ -146,15 +149,24 @@ class SessionData:
         return self.plan.profile
 
     @property
+    def uncertainty(self) -> str:
+        """How Kaspar showed how sure it was: spoken, body, both or none (sessions from
+        before the modes: speak_uncertainty true is spoken, false none)."""
+        plan = self.plan
+        if plan.uncertainty is not None:
+            return plan.uncertainty
+        return "none" if plan.speak_uncertainty is False else "spoken"
+
+    @property
     def speak_uncertainty(self) -> bool:
         """Whether Kaspar said how sure it was."""
-        return self.plan.speak_uncertainty
+        return self.uncertainty in SPOKEN_MODES
 
     @property
     def condition(self) -> str:
-        """profile/spoken or profile/silent."""
-        spoken = "spoken" if self.speak_uncertainty else "silent"
-        return self.meta.condition or f"{self.profile}/{spoken}"
+        """profile/spoken, profile/body, profile/both or profile/silent."""
+        word = CONDITION_LABELS.get(self.uncertainty, self.uncertainty)
+        return self.meta.condition or f"{self.profile}/{word}"
 
     @property
     def variant(self) -> str:
@@ -183,6 +195,7 @@ class SessionData:
             "condition": self.condition,
             "profile": self.profile,
             "speak_uncertainty": self.speak_uncertainty,
+            "uncertainty": self.uncertainty,
             "variant": self.variant,
             "language": self.language,
         }

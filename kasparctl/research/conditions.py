@@ -1,6 +1,7 @@
 """Sessions grouped by condition, as the problems, clusters and children the report works on.
 
-A condition is the plan's (learner profile / uncertainty spoken or silent).
+A condition is the plan's (learner profile / uncertainty mode: spoken, body, both, or
+silent for none).
 The pilot and the names game are different games, so when the sessions mix
 variants the variant is part of the condition too.
 
@@ -33,10 +34,10 @@ CLUSTER_UNITS = ("group", "session")
 
 @dataclass(frozen=True, slots=True)
 class Factors:
-    """What makes a condition: the learner profile, whether Kaspar spoke, the game."""
+    """What makes a condition: the learner profile, the uncertainty mode, the game."""
 
     profile: str
-    spoken: bool
+    uncertainty: str  # spoken, body, both or none
     variant: str
 
 
@@ -66,6 +67,9 @@ class Condition:
     # By place in the turn order (child 1, 2...), over every session: the plan's own view.
     feedback_by_position: dict[int, Feedback] = field(default_factory=dict)
     undone: int = 0
+    # Seconds from each counted question's end to its answer; prompts while guessing.
+    reaction_times: list[float] = field(default_factory=list)
+    prompts: int = 0
 
     @cached_property
     def stats(self) -> StudyStats:
@@ -116,7 +120,7 @@ def by_condition(
     for index, (session, label) in enumerate(progress(labelled, "reading records", "session")):
         condition = conditions.setdefault(
             label,
-            Condition(label, Factors(session.profile, session.speak_uncertainty, session.variant)),
+            Condition(label, Factors(session.profile, session.uncertainty, session.variant)),
         )
         condition.sessions.append(session)
         _collect(session, index, condition, params, children, cluster_of(session, cluster_unit))
@@ -144,31 +148,51 @@ def _collect(
                 continue  # damage the index warned about
             builder.add(record)
             feedback.add(record)
+            condition.reaction_times.append(record.reaction_time)
             condition.feedback_by_position.setdefault(record.child_index + 1, Feedback()).add(
                 record
             )
             if children is not None:
                 children.child(session, record.child_index, condition.label).answer(record)
+        elif child is not None and isinstance(record, PromptRecord):
+            condition.prompts += 1  # a prompt while guessing (whose turn it was)
+            if children is not None:
+                children.child(session, child, condition.label).prompts += 1
         elif children is not None and child is not None:
             measures = children.child(session, child, condition.label)
-            if isinstance(record, PromptRecord):
-                measures.prompts += 1
-            elif isinstance(record, PressRecord):
+            if isinstance(record, PressRecord):
                 measures.extra_presses += 1
             elif isinstance(record, UndoRecord):
                 measures.undos += 1
     condition.problems.extend(Problem(toys, record, cluster) for record in builder.problems())
 
 
-def pooled(conditions: Sequence[Condition]) -> Condition:
+def pooled(conditions: Sequence[Condition], label: str = "all") -> Condition:
     """Every session in one: the "all" column beside the conditions."""
-    everything = Condition("all")
+    everything = Condition(label)
     for condition in conditions:
         everything.sessions.extend(condition.sessions)
         everything.problems.extend(condition.problems)
         everything.undone += condition.undone
+        everything.reaction_times.extend(condition.reaction_times)
+        everything.prompts += condition.prompts
         for cluster, counts in condition.feedback_by_cluster.items():
             everything.feedback_by_cluster.setdefault(cluster, Feedback()).merge(counts)
         for position, counts in condition.feedback_by_position.items():
             everything.feedback_by_position.setdefault(position, Feedback()).merge(counts)
     return everything
+
+
+def by_uncertainty(conditions: Sequence[Condition]) -> list[Condition]:
+    """The conditions pooled by uncertainty mode (across profiles and variants), in
+    MODE_ORDER: spoken, body, both, none; each labelled by its mode."""
+    modes: dict[str, list[Condition]] = {}
+    for condition in conditions:
+        mode = condition.factors.uncertainty if condition.factors else "unknown"
+        modes.setdefault(mode, []).append(condition)
+    order = [mode for mode in MODE_ORDER if mode in modes] + sorted(set(modes) - set(MODE_ORDER))
+    return [pooled(modes[mode], mode) for mode in order]
+
+
+# The uncertainty modes in the report's order.
+MODE_ORDER = ("spoken", "body", "both", "none")

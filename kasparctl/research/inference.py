@@ -489,8 +489,8 @@ def condition_contrasts(
             if factor is None:
                 continue
             a, b = first, second
-            if factor == "uncertainty mode" and a.factors and not a.factors.spoken:
-                a, b = b, a  # spoken - silent
+            if factor == "uncertainty mode" and _shows_less(a, b):
+                a, b = b, a  # the mode that shows more first: spoken - silent, both - body
             contrasts += compare(
                 factor,
                 (a.label, b.label),
@@ -507,11 +507,25 @@ def _one_factor(first: Condition, second: Condition) -> str | None:
     a, b = first.factors, second.factors
     if a is None or b is None or a.variant != b.variant:
         return None
-    if a.profile == b.profile and a.spoken != b.spoken:
+    if a.profile == b.profile and a.uncertainty != b.uncertainty:
         return "uncertainty mode"
-    if a.profile != b.profile and a.spoken == b.spoken:
+    if a.profile != b.profile and a.uncertainty == b.uncertainty:
         return "learner profile"
     return None
+
+
+# Uncertainty modes from the one that shows the most: a contrast's A is the earlier.
+MODE_ORDER = ("both", "spoken", "body", "none")
+
+
+def _shows_less(first: Condition, second: Condition) -> bool:
+    """Whether `first`'s uncertainty mode comes after `second`'s in MODE_ORDER."""
+    assert first.factors is not None and second.factors is not None
+
+    def place(mode: str) -> int:
+        return MODE_ORDER.index(mode) if mode in MODE_ORDER else len(MODE_ORDER)
+
+    return place(first.factors.uncertainty) > place(second.factors.uncertainty)
 
 
 def _child_sums(child: ChildMeasures) -> dict[str, tuple[float, float]]:

@@ -10,6 +10,7 @@ groups of participants, and each child's teaching measures.
 
 from __future__ import annotations
 
+import statistics
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -81,6 +82,43 @@ def condition_summary(condition: Condition, found: Intervals) -> dict[str, Any]:
     }
 
 
+def _ratio(numerator: float, denominator: float) -> float | None:
+    return numerator / denominator if denominator else None
+
+
+def mode_summary(mode: Condition) -> dict[str, Any]:
+    """One uncertainty mode's column: its sessions pooled over profiles and variants, and
+    the main outcome measures (kasparctl.research.conditions.by_uncertainty)."""
+    stats = mode.stats
+    feedback = mode.feedback
+    answers = len(mode.reaction_times)
+    with_key = sum(1 for p in mode.problems if p.record.trials[0].correct is not None)
+    return {
+        "uncertainty": mode.label,
+        "conditions": sorted({s.condition for s in mode.sessions}),
+        "sessions": len(mode.sessions),
+        "groups": sorted({s.group for s in mode.sessions}),
+        "trials_total": stats.trials_total,
+        "problems": stats.problems,
+        "problems_learned": stats.problems_learned,
+        "problems_learned_rate": _ratio(stats.problems_learned, stats.problems),
+        "trials_mean": stats.trials_mean,
+        "trials_sd": stats.trials_sd,
+        "problems_with_answer_key": with_key,
+        "first_guess_correct": stats.first_guess_correct,
+        "first_guess_correct_rate": _ratio(stats.first_guess_correct, with_key),
+        "perseverative_error_rate": stats.perseverative_error_rate,
+        "win_shift_rate": stats.win_shift_rate,
+        "final_entropy_mean": stats.final_entropy_mean,
+        "wrong_green": feedback.wrong_green,
+        "wrong_guesses": feedback.wrong_guesses,
+        "wrong_red": feedback.wrong_red,
+        "right_guesses": feedback.right_guesses,
+        "reaction_time_median": statistics.median(mode.reaction_times) if answers else None,
+        "prompts_per_answer": _ratio(mode.prompts, answers),
+    }
+
+
 def build_summary(
     conditions: Sequence[Condition],
     everything: Condition,
@@ -89,8 +127,10 @@ def build_summary(
     contrasts: Sequence[Contrast] = (),
     children: Sequence[dict[str, Any]] = (),
     participants_file: str | None = None,
+    modes: Sequence[Condition] = (),
 ) -> dict[str, Any]:
-    """The report's summary.json: every condition, all of them pooled, contrasts, children."""
+    """The report's summary.json: every condition, all of them pooled, the uncertainty
+    modes side by side, contrasts, children."""
     sessions = everything.sessions
     return {
         "sessions": [s.uid for s in sessions],
@@ -105,6 +145,7 @@ def build_summary(
         },
         "conditions": [condition_summary(c, intervals[c.label]) for c in conditions],
         "all": condition_summary(everything, intervals["all"]),
+        "uncertainty_modes": [mode_summary(mode) for mode in modes],
         "contrasts": [c.plain() for c in contrasts],
         "participants_file": participants_file,
         "children": list(children),
@@ -326,6 +367,52 @@ def _children_table(children: Sequence[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _mode_rows(m: dict[str, Any]) -> list[tuple[str, str]]:
+    def share(count: int, total: int | None, rate: float | None) -> str:
+        return "-" if rate is None else _share(count, total)
+
+    return [
+        ("Conditions", ", ".join(m["conditions"])),
+        ("Sessions", str(m["sessions"])),
+        ("Groups", str(len(m["groups"]))),
+        ("Trials", str(m["trials_total"])),
+        (
+            "Problems learned",
+            share(m["problems_learned"], m["problems"], m["problems_learned_rate"]),
+        ),
+        ("Trials to learn, mean ± sd", _mean_sd(m["trials_mean"], m["trials_sd"])),
+        (
+            "First guess correct",
+            share(
+                m["first_guess_correct"],
+                m["problems_with_answer_key"],
+                m["first_guess_correct_rate"],
+            ),
+        ),
+        ("Perseverative errors, of trials", _rate(m["perseverative_error_rate"])),
+        ("Win-shifts, of trials", _rate(m["win_shift_rate"])),
+        ("Final entropy, before the last guess (bits)", _number(m["final_entropy_mean"], 3)),
+        ("Wrong greens (green for a wrong guess)", _share(m["wrong_green"], m["wrong_guesses"])),
+        ("Wrong reds (red for a right guess)", _share(m["wrong_red"], m["right_guesses"])),
+        ("Reaction time, median (s)", _number(m["reaction_time_median"])),
+        ("Prompts per answer", _number(m["prompts_per_answer"])),
+    ]
+
+
+def _rate(value: float | None) -> str:
+    return "-" if value is None else percent(value)
+
+
+def _modes_table(modes: Sequence[dict[str, Any]]) -> list[str]:
+    """The uncertainty modes side by side: a column per mode, a row per measure."""
+    header = ["", *(m["uncertainty"] for m in modes)]
+    rows_by_mode = [_mode_rows(m) for m in modes]
+    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
+    for index, (name, _) in enumerate(rows_by_mode[0]):
+        lines.append("| " + " | ".join([name, *(rows[index][1] for rows in rows_by_mode)]) + " |")
+    return lines
+
+
 def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[str]) -> str:
     """The report's summary.md: the conditions side by side, contrasts, children, figures."""
     columns = list(summary["conditions"])
@@ -349,6 +436,19 @@ def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[st
         *("| " + " | ".join(row) + " |" for row in table),
         "",
     ]
+    modes = summary.get("uncertainty_modes", [])
+    if len(modes) > 1:
+        lines += [
+            "## Uncertainty modes",
+            "",
+            "How Kaspar showed how sure it was before each guess (spoken: said; body: its "
+            "thinking behaviour and the way it pointed; both; none), each mode's sessions "
+            "pooled over profiles and variants. Intervals and tests: the conditions and "
+            "contrasts.",
+            "",
+            *_modes_table(modes),
+            "",
+        ]
     if summary["contrasts"]:
         lines += [
             "## Contrasts",

@@ -34,7 +34,8 @@ from hal.servos.api import ServoApi
 from hal.servos.sim import SimServos
 from hal.voice.api import VoiceOutput
 from hal.voice.sim import SimVoice
-from kasparctl.config import Config, SessionPlan, parse_config
+from kasparctl.body.api import Body, StillBody
+from kasparctl.config import Config, SessionPlan, UncertaintyMode, parse_config
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.language import phrasebook_for
 from kasparctl.game.machine import Game, planned
@@ -145,6 +146,8 @@ class DemoOptions:
     think_s: tuple[float, float] = DEFAULT_THINK_S
     messiness: Messiness = field(default_factory=Messiness)
     interactive: bool = False
+    # How Kaspar shows how sure it is, for a new session (None: as its plan says).
+    uncertainty: UncertaintyMode | None = None
     # Printed lines: the dialogue and what the children and the robot do (the
     # stdout of the moment the demo runs, not of the moment this was imported).
     out: TextIO = field(default_factory=lambda: sys.stdout)
@@ -201,6 +204,8 @@ class DemoRig(Generic[ServosT]):
     storage_failed: str | None = None
     # The researcher's own simulated device, when their commands come from one.
     researcher: SimKeyfob | None = None
+    # Kaspar's body language (the game's too): started and closed with the robot.
+    body: Body = field(default_factory=StillBody)
 
     async def command(self, name: str) -> None:
         """The researcher's command `name` (next, pause, undo, stop), as they give it:
@@ -218,6 +223,7 @@ class DemoRig(Generic[ServosT]):
             # Powered on limp; torque on holds each joint where it is (no jump).
             await self.servos.set_compliant(group, False)
         await self.keyfob.start()
+        await self.body.start()
         storage = asyncio.Event()
 
         def on_storage_fault(event: GameEvent, info: dict[str, Any]) -> None:
@@ -239,6 +245,7 @@ class DemoRig(Generic[ServosT]):
             if self.researcher is not None:
                 await self.researcher.close()
             await self.keyfob.close()
+            await self.body.close()
             await self.voice.close()
             await self.servos.close()
             self.game.flush_unwritten()
@@ -279,17 +286,22 @@ class DemoRig(Generic[ServosT]):
 
 
 def build(
-    config: Config, options: DemoOptions, children_answers: list[int] | None = None
+    config: Config,
+    options: DemoOptions,
+    children_answers: list[int] | None = None,
+    *,
+    body: Body | None = None,
 ) -> DemoRig[SimServos]:
     """Assemble the simulated robot and (or resume) a session in options.state_dir.
 
     `children_answers` makes the simulated children believe other answers than
-    the plan's answer key (to show the learner does not see the key).
+    the plan's answer key (to show the learner does not see the key); `body` is
+    Kaspar's body language (None: a StillBody).
     """
     clock = LoopClock()
     servos = SimServos(config.servos, clock)
     voice = SimVoice(options.out, clock, clips=config.voice.clips)
-    return assemble(config, options, servos, voice, children_answers)
+    return assemble(config, options, servos, voice, children_answers, body=body)
 
 
 def assemble(
@@ -300,8 +312,10 @@ def assemble(
     children_answers: list[int] | None = None,
     *,
     patience: int = MAX_RESUMES,
+    body: Body | None = None,
 ) -> DemoRig[ServosT]:
-    """build() with the servos and the voice given, e.g. real drivers on pty emulators."""
+    """build() with the servos and the voice given, e.g. real drivers on pty emulators;
+    `body` is Kaspar's body language (None: a StillBody)."""
     clock = LoopClock()
     out = options.out
 
@@ -324,6 +338,9 @@ def assemble(
     book = phrasebook_for(config)
     picker = PhrasePicker(book, np.random.default_rng([options.seed, 2]))
     plan = config.sessions[0] if config.sessions else SessionPlan(group="demo")
+    if options.uncertainty is not None:
+        mode = options.uncertainty
+        plan = msgspec.structs.replace(plan, uncertainty=mode, speak_uncertainty=None)
     outcome = resume_or_abandon(options.state_dir, config.game, config.profile)
     for abandoned in outcome.abandoned:
         why = abandoned.reason
@@ -348,7 +365,8 @@ def assemble(
     hardware = Hardware(servos, keyfob, voice, researcher)
     # Before the session opens and after it ends, what happens goes where the service puts it.
     events = EventLog(options.state_dir)
-    game = Game(config, hardware, picker, open_session, resumed, event_log=events)
+    body = body if body is not None else StillBody()
+    game = Game(config, hardware, picker, open_session, resumed, event_log=events, body=body)
     children = None
     if not options.interactive:
         # A resumed game gets fresh but reproducible children: seeded by where it resumed.
@@ -373,7 +391,7 @@ def assemble(
     transcript = out if isinstance(out, Transcript) else None
     return DemoRig(
         game, servos, keyfob, voice, children, resumed is not None, options.state_dir,
-        transcript=transcript, abandoned=outcome.abandoned, researcher=researcher,
+        transcript=transcript, abandoned=outcome.abandoned, researcher=researcher, body=body,
     )
 
 
@@ -490,9 +508,21 @@ def _answers(config: Config, plan: SessionPlan, seed: int) -> list[int]:
 
 
 def _narrator(narrate: Callable[[str], None]) -> Listener:
+    looked_at: list[str] = [""]  # the last look told: Kaspar turning back is not news
+
     def listener(event: GameEvent, info: dict[str, Any]) -> None:
         if event is GameEvent.POINT:
-            narrate(f"Kaspar points at {info['target']}")
+            style = info.get("style")
+            narrate(f"Kaspar points at {info['target']}" + (f", {style}" if style else ""))
+        elif event is GameEvent.BODY:
+            note = body_note(info)
+            if note is None:
+                return
+            if info.get("kind") == "look":
+                if note == looked_at[0]:
+                    return
+                looked_at[0] = note
+            narrate(note)
         elif event is GameEvent.LISTENING:
             narrate("Kaspar listens")
         elif event is GameEvent.STATE and info["state"] in ("paused", "fault", *ENDS):
@@ -503,6 +533,42 @@ def _narrator(narrate: Callable[[str], None]) -> Listener:
             narrate(f"session resumed in step {info['step']}")
 
     return listener
+
+
+# How the transcript names each behaviour the game asks for.
+BEHAVIOUR_NOTES = {
+    "thinking": "Kaspar tilts its head, thinking",
+    "nod": "Kaspar nods",
+    "happy": "Kaspar smiles",
+    "sad": "Kaspar looks sad",
+    "greeting": "Kaspar waves hello",
+    "farewell": "Kaspar waves goodbye",
+}
+
+
+def body_note(info: dict[str, Any]) -> str | None:
+    """A GameEvent.BODY in a few words: a behaviour, or where Kaspar looks (None: not shown)."""
+    kind = info.get("kind")
+    if kind == "perform":
+        behaviour = str(info["behaviour"])
+        note = BEHAVIOUR_NOTES.get(behaviour, f"Kaspar: {behaviour}")
+        if behaviour == "thinking":
+            note += _how_hard(float(info["strength"]))
+        return note
+    if kind == "look" and info.get("gaze") == "child":  # whose turn; the point says the bag
+        return f"Kaspar looks at {info['name']}" if info.get("name") else None
+    return None  # life on and off is too small a thing to print
+
+
+def _how_hard(strength: float) -> str:
+    """How hard Kaspar thinks, in words, by the thinking behaviour's strength."""
+    if strength >= 0.75:
+        return " hard"
+    if strength >= 0.5:
+        return ""
+    if strength > 0.25:
+        return " a little"
+    return " briefly"
 
 
 # In simulated time a game that waits for ever would spin for ever: past this much

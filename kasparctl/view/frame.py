@@ -344,7 +344,9 @@ def _entropy_row(session: SessionView, question: Question, width: int, glyphs: G
         row.add("  band ", "dim").add(f'"{question.band.replace("_", " ")}"', "title")
         row.add(" (said)" if not question.open else " (to say)", "dim")
     elif session.speak_uncertainty is False:
-        row.add("  silent condition: no band said", "dim")
+        # "silent", or "body" where Kaspar shows it with its body instead.
+        mode = session.condition.rsplit("/", 1)[-1] or "silent"
+        row.add(f"  {mode} condition: no band said", "dim")
     return row
 
 
