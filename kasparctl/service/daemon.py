@@ -45,6 +45,9 @@ from hal import Hardware
 from hal.build import build
 from hal.clock import LoopClock
 from hal.errors import HalError
+from kasparctl.body.api import Body, StillBody
+from kasparctl.body.behaviours import BehaviourError
+from kasparctl.body.build import make_body
 from kasparctl.config import Config, ConfigError, SessionPlan, load_config, servo_backend_given
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.language import phrasebook_for
@@ -133,6 +136,8 @@ class Daemon:
         self._state_dir = Path(self.config.state_dir)
         self.notifier = notifier or Notifier()
         self.hw: Hardware | None = hardware
+        # Kaspar's body language: built with the hardware, one for every game.
+        self.body: Body = StillBody()
         self.game: Game | None = None
         self.listeners = list(listeners)
         self.events = EventLog(self._state_dir)
@@ -282,6 +287,19 @@ class Daemon:
         await self.hw.keyfob.start()
         if self.hw.researcher is not None:
             await self.hw.researcher.start()
+        await self._open_body()
+
+    async def _open_body(self) -> None:
+        """The body the configuration asks for; a bad behaviour file leaves Kaspar still,
+        said once in the journal, and the game goes on (the body is no part of the study's
+        records)."""
+        assert self.hw is not None
+        try:
+            self.body = make_body(self.config, self.hw.servos, self.hw.voice)
+        except BehaviourError as error:
+            log.error("body language off: a behaviour file is wrong", error=str(error))
+            self.body = StillBody()
+        await self.body.start()
 
     async def _one_session(self) -> None:
         assert self.hw is not None
@@ -319,6 +337,7 @@ class Daemon:
             resumed,
             stopped=stopped,
             event_log=self.events,
+            body=self.body,
             startup_faults=faults,
             known_problems=self._carried_problems,
             unwritten=self._unwritten,
@@ -560,6 +579,8 @@ class Daemon:
             for token in tokens:
                 self._reload_desk.answer(token, Outcome.FAILED, str(error))
             return
+        if config.body != self.config.body:
+            log.warning("body: takes effect at the next restart (the body is built at the start)")
         if Path(config.state_dir) != self.state_dir:
             log.warning(
                 "state_dir changed: takes effect at the next restart",
@@ -606,6 +627,8 @@ class Daemon:
         if hw is None:
             return
         hw.voice.cancel()
+        # Before the rest: nothing of a behaviour may move a joint once Kaspar goes there.
+        await self.body.close()
         try:
             async with asyncio.timeout(REST_TIMEOUT_S):
                 await hw.servos.rest()

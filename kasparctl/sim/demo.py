@@ -35,6 +35,7 @@ from hal.servos.sim import SimServos
 from hal.voice.api import VoiceOutput
 from hal.voice.sim import SimVoice
 from kasparctl.body.api import Body, StillBody
+from kasparctl.body.build import make_body
 from kasparctl.config import Config, SessionPlan, UncertaintyMode, parse_config
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.language import phrasebook_for
@@ -296,7 +297,7 @@ def build(
 
     `children_answers` makes the simulated children believe other answers than
     the plan's answer key (to show the learner does not see the key); `body` is
-    Kaspar's body language (None: a StillBody).
+    Kaspar's body language (None: the configuration's, make_body).
     """
     clock = LoopClock()
     servos = SimServos(config.servos, clock)
@@ -315,7 +316,7 @@ def assemble(
     body: Body | None = None,
 ) -> DemoRig[ServosT]:
     """build() with the servos and the voice given, e.g. real drivers on pty emulators;
-    `body` is Kaspar's body language (None: a StillBody)."""
+    `body` is Kaspar's body language (None: the configuration's, make_body)."""
     clock = LoopClock()
     out = options.out
 
@@ -365,7 +366,7 @@ def assemble(
     hardware = Hardware(servos, keyfob, voice, researcher)
     # Before the session opens and after it ends, what happens goes where the service puts it.
     events = EventLog(options.state_dir)
-    body = body if body is not None else StillBody()
+    body = body if body is not None else make_body(config, servos, voice)
     game = Game(config, hardware, picker, open_session, resumed, event_log=events, body=body)
     children = None
     if not options.interactive:
