@@ -968,13 +968,6 @@ def _check_body(config: Config, fail: _Fail) -> None:
             check_pose(pose, key, config.servos, "")
         except ConfigError as error:
             fail(f"body.gaze.{error.key}", error.message)
-    targets = config.game.targets
-    if len(gaze.bags) > len(targets):
-        fail(
-            "body.gaze.bags",
-            f"expected at most {len(targets)} poses (one per target: "
-            f"{', '.join(targets) or 'none'}), found {len(gaze.bags)}",
-        )
 
 
 def _check_pointing_group(config: Config, fail: _Fail) -> None:

@@ -121,10 +121,6 @@ def test_the_body_table_is_checked_against_the_joints():
     with pytest.raises(ConfigError, match=r"body.gaze.children\[0\].head_yaw"):
         parse_config(_demo_toml("[body]\nenabled = true\n[body.gaze]\n"
                                 "children = [{ head_yaw = 99.0 }]\n"), "k.toml")
-    with pytest.raises(ConfigError, match=r"body.gaze.bags: expected at most 6 poses \(one per "
-                       r"target: bag 1, bag 2, bag 3, bag 4, bag 5, bag 6\), found 7"):
-        parse_config(_demo_toml("[body]\nenabled = true\n[body.gaze]\n"
-                                "bags = [{}, {}, {}, {}, {}, {}, {}]\n"), "k.toml")
     with pytest.raises(ConfigError, match=r"body.blink_interval_s: expected \[shortest, longest\]"):
         parse_config(_demo_toml("[body]\nblink_interval_s = [5.0, 2.0]\n"), "k.toml")
 
