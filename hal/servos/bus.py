@@ -131,6 +131,9 @@ class BusStats:
     bytes_out: int = 0
     bytes_in: int = 0
     retries: int = 0
+    # Replies that came but were not the one asked for (corrupt, another id, a stale
+    # answer): a protocol problem, unlike a late reply on a loaded machine.
+    bad_replies: int = 0
     timeouts: int = 0
     disconnects: int = 0
     reconnects: int = 0
@@ -188,6 +191,9 @@ class SerialBus:
     backoff_max: float = 2.0
     on_state: Callable[[BusState], None] | None = None
     stats: BusStats = field(default_factory=BusStats)
+    # Written each time the port opens, before any exchange: what every servo behind it
+    # must be told again after a power cycle (HerkuleX: its ACK policy).
+    greeting: bytes = b""
 
     def __post_init__(self) -> None:
         """Prepare the job queue and state; nothing runs until start()."""
@@ -413,6 +419,13 @@ class SerialBus:
             failed_attempts=repeated[1] if repeated else 0,
         )
         self._serial = port
+        if self.greeting:
+            try:
+                port.write(self.greeting)
+            except (SerialException, OSError, termios.error) as error:
+                self._lost(error)
+                return
+            self.stats.bytes_out += len(self.greeting)
         self._backoff = self.backoff_initial
         self._set_state(BusState.CONNECTED)
 
@@ -476,7 +489,10 @@ class SerialBus:
             except (SerialException, OSError, termios.error) as error:
                 self._lost(error)
                 raise PortUnavailable(f"bus {self.name}: {error}") from None
-            except (BusTimeout, CodecError) as error:
+            except BusTimeout as error:
+                last = error
+            except CodecError as error:
+                self.stats.bad_replies += 1
                 last = error
         if isinstance(last, BusTimeout):
             self.stats.timeouts += 1

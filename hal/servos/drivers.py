@@ -296,6 +296,12 @@ class Dynamixel2Driver(BusDriver):
         )
 
 
+def _ack_policy_packet() -> bytes:
+    """Every HerkuleX servo: answer reads only (RAM register 1; the published Kaspar driver
+    wrote it to 0x34, the torque register)."""
+    return hx.ram_write(hx.BROADCAST_ID, hx.Ram.ACK_POLICY, bytes((hx.AckPolicy.READS_ONLY,)))
+
+
 class HerkulexDriver(BusDriver):
     """HerkuleX DRS-0101/0201 servos, whatever ACK policy a previous program left them at.
 
@@ -313,27 +319,14 @@ class HerkulexDriver(BusDriver):
     def __init__(self, bus: SerialBus) -> None:
         """Drive the HerkuleX servos on `bus`; nothing is sent before start()."""
         super().__init__(bus)
-        self._configured_at: int | None = None  # bus reconnects when the policy was last sent
         self._temperature_limits: dict[int, float] = {}
-
-    async def start(self) -> None:
-        """Start the bus and set every servo's ACK policy (if the port is there yet)."""
-        await super().start()
-        await self._configure()
-
-    async def _configure(self) -> None:
-        """Broadcast ACK policy 1 once per connection of the port: a reconnect may follow a
-        power cycle, after which each servo has its EEP policy back."""
-        reconnects = self.bus.stats.reconnects
-        if self._configured_at == reconnects or not self.bus.connected:
-            return
-        await self._send_ack_policy()
-        self._configured_at = reconnects
+        # Sent by the bus's owner thread each time the port opens, before anything else:
+        # a reconnect may follow a power cycle, after which each servo has its EEP policy
+        # back, and a read must not go first.
+        bus.greeting = _ack_policy_packet()
 
     async def _send_ack_policy(self) -> None:
-        # RAM register 1. (The published Kaspar driver wrote it to 0x34, the torque register.)
-        policy = bytes((hx.AckPolicy.READS_ONLY,))
-        await self.bus.transact(hx.ram_write(hx.BROADCAST_ID, hx.Ram.ACK_POLICY, policy))
+        await self.bus.transact(_ack_policy_packet())
 
     def _ack(self, servo_id: int, command: hx.Command) -> Callable[[list[bytes]], hx.Ack]:
         def decode(packets: list[bytes]) -> hx.Ack:
@@ -374,7 +367,6 @@ class HerkulexDriver(BusDriver):
         build = hx.eep_read if eep else hx.ram_read
         exchange = Exchange(build(servo_id, address, length), 1, self.framing,
                             self._value(servo_id, command, address, length), 11 + length)
-        await self._configure()
         (outcome,) = await self._reasserted([exchange])
         (reply,) = self._named([servo_id], [outcome])
         assert isinstance(reply, hx.Ack)
@@ -396,7 +388,6 @@ class HerkulexDriver(BusDriver):
 
         0 for a servo that answers STAT but not the model read.
         """
-        await self._configure()
         try:
             await self._ask(servo_id, hx.stat(servo_id), self._ack(servo_id, hx.Command.STAT), 9)
         except ServoSilent:
@@ -409,7 +400,6 @@ class HerkulexDriver(BusDriver):
 
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
         """One RAM_READ of the calibrated position per servo, all in one hand-off."""
-        await self._configure()
         address = hx.Ram.CALIBRATED_POSITION
         exchanges = [
             Exchange(hx.ram_read(i, address, 2), 1, self.framing,
@@ -425,21 +415,18 @@ class HerkulexDriver(BusDriver):
 
     async def write_goals(self, goals: Mapping[int, tuple[int, float]], step: float) -> None:
         """One S_JOG with the play time of one control step (1 to 255 units of 11.2 ms)."""
-        await self._configure()
         playtime = min(hx.MAX_PLAYTIME, max(1, round(step / hx.PLAYTIME_SECONDS)))
         moves = [(servo_id, raw, 0) for servo_id, (raw, _speed) in goals.items()]
         await self.bus.transact(hx.s_jog(playtime, moves))
 
     async def set_torque(self, ids: Sequence[int], on: bool) -> None:
         """RAM_WRITE of TORQUE_CONTROL per servo in one write; unanswered at ACK policy 1."""
-        await self._configure()
         value = bytes((hx.TorqueControl.ON if on else hx.TorqueControl.FREE,))
         request = b"".join(hx.ram_write(i, hx.Ram.TORQUE_CONTROL, value) for i in ids)
         await self.bus.transact(request)
 
     async def reset_errors(self, ids: Sequence[int]) -> None:
         """RAM_WRITE of zero to STATUS_ERROR and STATUS_DETAIL: a HerkuleX latches them."""
-        await self._configure()
         zero = bytes((0, 0))
         await self.bus.transact(b"".join(hx.ram_write(i, hx.Ram.STATUS_ERROR, zero) for i in ids))
 
