@@ -33,7 +33,6 @@ from soak_rig import (  # noqa: E402
 
 from hal.clock import LoopClock  # noqa: E402
 from hal.voice.speaker import Voice  # noqa: E402
-from kasparctl.body.api import Body, StillBody  # noqa: E402
 from kasparctl.config import UNCERTAINTY_MODES, Config  # noqa: E402
 from kasparctl.game.session import RECORDS_FILE, find_unfinished, read_json_lines, write_atomic  # noqa: E402
 from kasparctl.log import configure_logging  # noqa: E402
@@ -65,17 +64,6 @@ def soak_config(game: int) -> Config:
     return msgspec.structs.replace(config, servos=servos, sessions=plans)
 
 
-def soak_body(config: Config) -> Body:
-    """Kaspar's body language in the soak: every behaviour the game asks for is asked of it.
-
-    A StillBody until the body engine is wired here (kasparctl.body's factory, on the
-    same emulated servos): the game's side of it (thinking, the points by uncertainty,
-    gaze and life, the cancellations) runs either way.
-    """
-    del config
-    return StillBody()
-
-
 def game_seed(seed: int, game: int) -> int:
     return seed * 1_000_003 + game
 
@@ -101,7 +89,8 @@ async def play(game: int, directory: Path, seed: int, faults: int, ledger: Ledge
         options = DemoOptions(
             state_dir=directory / "state", seed=game_seed(seed, game), out=io.StringIO()
         )
-        rig = assemble(config, options, servos, voice, patience=PATIENCE, body=soak_body(config))
+        # The configuration's body (the demo robot's: on), streaming on the same emulated bus.
+        rig = assemble(config, options, servos, voice, patience=PATIENCE)
         watch = StateWatch()
         watch.resumed.append(lambda: ledger.write(event="resumed", wall=time.time()))
         rig.game.listeners.append(watch)
