@@ -22,6 +22,7 @@ from test_game import config_for, records_of, trials_of
 
 from hal.servos.api import FaultKind, ServoApi
 from kasparctl.body.api import Gaze, GazeKind
+from kasparctl.body.api import StillBody
 from kasparctl.config import Config, SessionPlan
 from kasparctl.game import bodywork
 from kasparctl.game.bodywork import PointStyle, normalised_entropy, point, point_style
@@ -254,7 +255,7 @@ def test_without_a_body_the_happy_and_sad_poses_are_the_face(tmp_path: Path) -> 
 
     async def main() -> None:
         options = DemoOptions(state_dir=tmp_path / "still", seed=2, out=io.StringIO())
-        rig = build(config_for("names"), options)
+        rig = build(config_for("names"), options, body=StillBody())
         original = rig.servos.move
 
         async def move(pose: dict[str, float], duration: float) -> None:

@@ -29,7 +29,7 @@ import contextlib
 import random
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import structlog
 
@@ -95,6 +95,8 @@ class _GazeMove:
     start: dict[str, float]
     target: dict[str, float]
     began: float | None = None
+    # The target reached and sent: the joints layer holds it from here on.
+    settled: bool = False
 
 
 class LiveBody:
@@ -128,6 +130,9 @@ class LiveBody:
         self._mouth_joint = mouth if mouth and mouth in self._present else None
         self._mouth_closed = rests.get(mouth, 0.0)
         self.mouth = Mouth(clock, latency_s, settings.mouth_full_level, self.period)
+        # A line's sound wakes a quiet loop at once (the mouth must not wait for a poll).
+        self.mouth.on_news = self._poke
+        self._wake = asyncio.Event()
         self._alive = False
         self._gesture: _Playback | None = None
         self._blink: _Playback | None = None
@@ -167,6 +172,8 @@ class LiveBody:
         if not alive:
             self._blink = self._idle = self._gaze = None
             self._next_blink = self._next_idle = None
+        else:
+            self._poke()
 
     def look_at(self, gaze: Gaze) -> None:
         """Turn head and eyes to the configured pose for `gaze`, when alive; returns at once."""
@@ -176,6 +183,7 @@ class LiveBody:
         if not target:
             return
         self._gaze = _GazeMove({}, target)
+        self._poke()
 
     async def perform(self, behaviour: str, strength: float = 1.0) -> None:
         """Play `behaviour` to its end (or until cancelled or replaced); never raises for it.
@@ -200,6 +208,7 @@ class LiveBody:
             self._gesture.finish()
         playback = _Playback(behaviour, strength, asyncio.get_running_loop().create_future())
         self._gesture = playback
+        self._poke()
         return playback
 
     def cancel(self) -> None:
@@ -228,7 +237,48 @@ class LiveBody:
             now = self._clock.now()
             if self.lateness is not None:
                 self.lateness.append(now - due)
-            await self.step(now)
+            sent = await self.step(now)
+            if not sent and self.quiet():
+                # Nothing moves: no goal to send until a layer has something to do. The
+                # joints layer holds every goal meanwhile; waking costs nothing on the
+                # robot and keeps whole games in simulated time as fast as without a body.
+                await self._rest_until(self._next_life())
+                begin, tick = self._clock.now(), 0
+
+    def quiet(self) -> bool:
+        """Whether no layer has anything to send (blinks and idle may still be scheduled)."""
+        gaze_moving = self._gaze is not None and not self._gaze.settled
+        return (
+            self._gesture is None
+            and self._blink is None
+            and self._idle is None
+            and not gaze_moving
+            and not self.mouth.claimed
+        )
+
+    def _next_life(self) -> float | None:
+        """When the next blink or idle movement is due, if Kaspar is alive."""
+        if not self._alive:
+            return None
+        due = [t for t in (self._next_blink, self._next_idle) if t is not None]
+        return min(due) if due else None
+
+    async def _rest_until(self, moment: float | None) -> None:
+        """Wait for a poke (a behaviour, a gaze, alive again, a line's sound) or `moment`."""
+        self._wake.clear()
+        waits: list[asyncio.Future[Any]] = [asyncio.ensure_future(self._wake.wait())]
+        if moment is not None:
+            delay = max(0.0, moment - self._clock.now())
+            waits.append(asyncio.ensure_future(self._clock.sleep(delay)))
+        try:
+            await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            for waiting in waits:
+                waiting.cancel()
+            await asyncio.gather(*waits, return_exceptions=True)
+
+    def _poke(self) -> None:
+        self._wake.set()
 
     async def step(self, now: float) -> dict[str, float]:
         """One tick: blend the layers for `now` and send the goals; the goals sent."""
@@ -288,11 +338,14 @@ class LiveBody:
         if move.began is None:
             move.began = now
             move.start = {j: held[j] for j in move.target if j in held}
+        if move.settled:
+            return  # held by the joints layer at its target
         fraction = minimum_jerk((now - move.began) / GAZE_MOVE_S)
         for joint, target in move.target.items():
             start = move.start.get(joint)
             if start is not None:
                 out[joint] = start + (target - start) * fraction
+        move.settled = now - move.began >= GAZE_MOVE_S
 
     def _additive(
         self, playback: _Playback, now: float, held: Mapping[str, float], out: dict[str, float]

@@ -10,7 +10,7 @@ closed at the end of a line, and at once when a line is cut.
 from __future__ import annotations
 
 import bisect
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from hal.clock import Clock
 
@@ -47,6 +47,8 @@ class Mouth:
         self._levels: list[float] = []
         self._frame = 0.01
         self._until: float | None = None  # the mouth is claimed until then
+        # Told of every new sound or cut (the body's loop wakes for it).
+        self.on_news: Callable[[], None] = lambda: None
 
     def on_envelope(self, start: float, frame_s: float, levels: Sequence[float]) -> None:
         """Schedule the frames of a piece of audio handed to the player at `start`."""
@@ -59,6 +61,7 @@ class Mouth:
             self._levels.append(level)
         end = heard + len(levels) * frame_s + CLOSE_TAIL_S
         self._until = max(self._until or end, end)
+        self.on_news()
 
     def on_end(self, cut: bool) -> None:
         """A line ended; cut, the mouth closes now (what was scheduled is dropped)."""
@@ -70,12 +73,18 @@ class Mouth:
         now = self._clock.now()
         self._drop_after(now - 1.0)
         self._until = now + CLOSE_TAIL_S
+        self.on_news()
 
     def silence(self) -> None:
         """Stop at once: nothing scheduled, the mouth no longer claimed (the body's cancel)."""
         self._starts.clear()
         self._levels.clear()
         self._until = None
+
+    @property
+    def claimed(self) -> bool:
+        """Whether a line is near: the mouth has levels to follow or a close to hold."""
+        return self._until is not None
 
     def opening(self, now: float) -> float | None:
         """How open (0 to 1) at `now`; None when no line is near (the mouth is not claimed)."""

@@ -6,7 +6,7 @@ the uncertainty mode: whether the body shows how sure Kaspar is), the arithmetic
 turns the learner's entropy into the thinking behaviour's strength and the way Kaspar
 points, and the news of each ask for the game's listeners (the demo's transcript).
 
-The mapping from uncertainty to the body (docs/body-in-the-game.md):
+The mapping from uncertainty to the body (docs/body.md):
 
 - strength h = entropy / log2(candidates), from 0 (sure) to 1 (no idea); one candidate
   left is 0. The thinking behaviour is performed with strength h before the point.
