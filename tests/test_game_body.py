@@ -21,8 +21,7 @@ from rig_events import on_event
 from test_game import config_for, records_of, trials_of
 
 from hal.servos.api import FaultKind, ServoApi
-from kasparctl.body.api import Gaze, GazeKind
-from kasparctl.body.api import StillBody
+from kasparctl.body.api import Gaze, GazeKind, StillBody
 from kasparctl.config import Config, SessionPlan
 from kasparctl.game import bodywork
 from kasparctl.game.bodywork import PointStyle, normalised_entropy, point, point_style

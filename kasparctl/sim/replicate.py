@@ -11,6 +11,8 @@ import io
 import tempfile
 from pathlib import Path
 
+import msgspec
+
 from kasparctl.config import Config
 from kasparctl.game.records import SessionRecord, TrialRecord, UndoRecord
 from kasparctl.game.session import RECORDS_FILE, read_records
@@ -23,7 +25,13 @@ from kasparctl.sim.teacher import Teacher
 def replicate(
     config: Config, games: int, first_seed: int = 0, teacher: Teacher | None = None
 ) -> StudyStats:
-    """Play `games` sessions (seeds first_seed...) and summarise every problem in them."""
+    """Play `games` sessions (seeds first_seed...) and summarise every problem in them.
+
+    The body is still: it changes no answer and no record the summary reads, and its
+    control loop would be most of the time of a game in simulated time.
+    """
+    still = msgspec.structs.replace(config.body, enabled=False)
+    config = msgspec.structs.replace(config, body=still)
     problems: list[ProblemRecord] = []
     with tempfile.TemporaryDirectory(prefix="kaspar-replicate-") as scratch:
         for index in range(games):
