@@ -200,12 +200,16 @@ def test_kaspar_shows_it_listens_with_its_pose_and_its_sound(tmp_path: Path) -> 
     seen: list[float] = []
 
     async def scenario(rig: DemoRig) -> None:
-        before = rig.servos.true_position("head_yaw")
         await on_event(rig, "listening")
-        await asyncio.sleep(0.6)
-        seen.append(rig.servos.true_position("head_yaw"))
-        await on_event(rig, "answered")
-        await asyncio.sleep(1.0)  # back from listening as Kaspar answers
+        # Where Kaspar looked as it asked (at the child, with a body): it goes back there.
+        before = rig.servos.true_position("head_yaw")
+        answered = asyncio.ensure_future(on_event(rig, "answered"))
+        furthest = before
+        while not answered.done():  # the pose is reached before the child answers
+            await asyncio.sleep(0.05)
+            furthest = max(furthest, rig.servos.true_position("head_yaw"))
+        seen.append(furthest)
+        await asyncio.sleep(1.5)  # back from listening as Kaspar answers
         seen.append(rig.servos.true_position("head_yaw") - before)
 
     result, _, out = play(tmp_path / "state", config=config, scenario=scenario)

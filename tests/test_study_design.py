@@ -273,6 +273,7 @@ def test_a_fitted_teacher_recovers_the_childrens_rates(tmp_path: Path, capsys: p
     low, high = model.think_s()
     assert low < 1.6 < high
     # simulate and demo take it.
+    capsys.readouterr()  # what the demos above printed
     assert main(["simulate", "--teacher", str(out), "--groups", "50", "--seed", "1", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["teacher"] == str(out)
     assert main(["demo", "--fast", "--seed", "1", "--teacher", str(out), "--state-dir", str(tmp_path / "d")]) == 0

@@ -46,6 +46,9 @@ log = structlog.get_logger("kasparctl.body")
 
 # Seconds a gaze shift takes (slower if a joint's speed limit says so).
 GAZE_MOVE_S = 0.6
+# Closer than this to home is home; a joint left away goes this share of the way each tick.
+HOME_EPSILON_DEG = 0.05
+HOME_PULL = 0.2
 BLINK = "blink"
 IDLE = "idle"
 
@@ -126,6 +129,9 @@ class LiveBody:
         self.period = 1.0 / settings.rate_hz
         self._present = set(servos.joints)
         rests = {j.name: j.rest_deg for j in servo_settings.joints}
+        # A behaviour played near a joint's limit is squashed against it here, quietly: the
+        # joints layer would clamp it too, but warns of every goal it clamps.
+        self._ranges = {j.name: j.range_deg for j in servo_settings.joints}
         mouth = settings.mouth_joint
         self._mouth_joint = mouth if mouth and mouth in self._present else None
         self._mouth_closed = rests.get(mouth, 0.0)
@@ -143,6 +149,12 @@ class LiveBody:
         self._task: asyncio.Task[None] | None = None
         self._noted: set[tuple[str, str]] = set()
         self._fault_seen = False
+        # Where each joint rests between behaviours: wherever the game (or anyone but the
+        # body) last put it, or where a gaze settled. Behaviours are offsets from here, so
+        # one cut short leaves nothing behind for the next to add to.
+        self._home: dict[str, float] = {}
+        # What the body itself last sent, to tell its own goals from the game's moves.
+        self._sent: dict[str, float] = {}
         # Set to a list to collect each tick's lateness in seconds (bench/bench_body_loop.py).
         self.lateness: list[float] | None = None
         # A latched fault ends every behaviour at once, loop running or not.
@@ -254,6 +266,7 @@ class LiveBody:
             and self._idle is None
             and not gaze_moving
             and not self.mouth.claimed
+            and not self.away_from_home()
         )
 
     def _next_life(self) -> float | None:
@@ -294,27 +307,69 @@ class LiveBody:
             self.cancel()
             return {}
         self._fault_seen = False
+        self._sent.update(sent)
         return sent
 
     def compose(self, now: float) -> dict[str, float]:
         """The blended target of every claimed joint at `now` (layers by priority)."""
         held = self._servos.commanded()
+        self._learn_home(held)
+        home = self._home
         out: dict[str, float] = {}
         if self._alive:
             self._schedule_life(now)
             self._gaze_layer(now, held, out)
             if self._idle is not None:
-                self._idle = self._additive(self._idle, now, held, out)
+                self._idle = self._additive(self._idle, now, home, out)
             if self._blink is not None:
-                self._blink = self._relative(self._blink, now, held, out)
+                self._blink = self._relative(self._blink, now, home, out)
         if self._mouth_joint is not None and self._mouth_joint in held:
             opening = self.mouth.opening(now)
             if opening is not None:
                 span = self._settings.mouth_open_deg
                 out[self._mouth_joint] = self._mouth_closed + opening * span
         if self._gesture is not None:
-            self._gesture = self._relative(self._gesture, now, held, out)
-        return {joint: value for joint, value in out.items() if joint in held}
+            self._gesture = self._relative(self._gesture, now, home, out)
+        for joint, rest in home.items():
+            # A joint a behaviour left away from home (cut short) goes back to it gently.
+            if joint not in out and abs(held[joint] - rest) > HOME_EPSILON_DEG:
+                out[joint] = held[joint] + (rest - held[joint]) * HOME_PULL
+        return {
+            joint: self._within(joint, value) for joint, value in out.items() if joint in held
+        }
+
+    def _within(self, joint: str, degrees: float) -> float:
+        low, high = self._ranges.get(joint, (degrees, degrees))
+        return min(max(degrees, low), high)
+
+    def _learn_home(self, held: Mapping[str, float]) -> None:
+        """A joint not where the body last sent it was moved by someone else: its new home."""
+        for joint, value in held.items():
+            sent = self._sent.get(joint)
+            if sent is None or abs(value - sent) > HOME_EPSILON_DEG:
+                self._home[joint] = value
+                self._sent[joint] = value
+                if sent is not None:
+                    self._yield_joint(joint)
+
+    def _yield_joint(self, joint: str) -> None:
+        """The game moved `joint` (its listening pose, a point): what the body was doing
+        with it ends there, and the rest of each behaviour goes on."""
+        for playback in (self._gesture, self._blink, self._idle):
+            if playback is not None and playback.base is not None:
+                playback.base.pop(joint, None)
+        if self._gaze is not None:
+            self._gaze.target.pop(joint, None)
+            self._gaze.start.pop(joint, None)
+
+    def away_from_home(self) -> bool:
+        """Whether a joint still has its way home to go."""
+        held = self._servos.commanded()
+        return any(
+            abs(held[joint] - rest) > HOME_EPSILON_DEG
+            for joint, rest in self._home.items()
+            if joint in held
+        )
 
     def _schedule_life(self, now: float) -> None:
         settings = self._settings
@@ -346,6 +401,8 @@ class LiveBody:
             if start is not None:
                 out[joint] = start + (target - start) * fraction
         move.settled = now - move.began >= GAZE_MOVE_S
+        if move.settled:
+            self._home.update({j: v for j, v in move.target.items() if j in move.start})
 
     def _additive(
         self, playback: _Playback, now: float, held: Mapping[str, float], out: dict[str, float]

@@ -283,6 +283,8 @@ class Game:
         self.body = BodyWork(
             body, lambda: self.plan, lambda info: self._emit(GameEvent.BODY, **info)
         )
+        # Behaviours the game does not wait for (a smile after an answer), kept until done.
+        self._showing: set[asyncio.Future[None]] = set()
         self.event_log = event_log
         self._startup_faults = tuple(startup_faults)
         # What is not working now, by part: shown by the daemon, cleared as each comes back.
@@ -1234,9 +1236,14 @@ class Game:
         pose (held briefly, then undone)."""
         if listened:
             await self.hw.servos.move(listened, duration=LISTEN_MOVE_S)
-        await self.body.perform(behaviour)
         if expression and self.body.fallback:
             await self._express(expression)
+            return
+        # The behaviour goes on while the game does: the next question must not wait for
+        # the end of a smile (the body's own loop plays it; a move or a cancel ends it).
+        shown = asyncio.ensure_future(self.body.perform(behaviour))
+        self._showing.add(shown)
+        shown.add_done_callback(self._showing.discard)
 
     async def _express(self, pose: dict[str, float]) -> None:
         before = await self.hw.servos.read_positions()

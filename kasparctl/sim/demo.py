@@ -16,6 +16,7 @@ import asyncio
 import dataclasses
 import errno
 import itertools
+import random
 import statistics
 import sys
 from collections.abc import Callable, Sequence
@@ -366,7 +367,9 @@ def assemble(
     hardware = Hardware(servos, keyfob, voice, researcher)
     # Before the session opens and after it ends, what happens goes where the service puts it.
     events = EventLog(options.state_dir)
-    body = body if body is not None else make_body(config, servos, voice)
+    if body is None:
+        # Seeded like everything else in the demo: blinks at the same moments, the same game.
+        body = make_body(config, servos, voice, rng=random.Random(options.seed))
     game = Game(config, hardware, picker, open_session, resumed, event_log=events, body=body)
     children = None
     if not options.interactive:
