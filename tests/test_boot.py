@@ -63,7 +63,7 @@ OFFLINE_PIP = {"PIP_NO_INDEX": "1", "PIP_FIND_LINKS": WHEELS_IN_CONTAINER}
 STATE_DIR = "/var/lib/kaspar"
 CONFIG = "/etc/kaspar/kaspar.toml"
 RESEARCHER_EDIT = "# edited by the researcher\n"
-IDLE = "waiting: long green starts the session"
+IDLE = "waiting: 'next' starts the session"
 PLACING = "step 1: placing the bags"
 # What the install puts on the machine, and so what a dry run must not.
 INSTALLED = {

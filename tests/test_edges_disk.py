@@ -53,8 +53,8 @@ async def cannot_save(rig: FaultRig, since_said: int = 0) -> str:
         "STATUS= saying it cannot save",
         lambda: next((s for s in reversed(rig.notifier.statuses) if "CANNOT SAVE" in s), None),
     )
-    assert "stop the session (both) or free the disk" in status
-    assert "long red resumes once it saves again" in status
+    assert "stop the session ('stop') or free the disk" in status
+    assert "'pause' resumes once it saves again" in status
     await rig.until("Kaspar saying so", lambda: phrase_said(rig, "fault", "storage", since_said))
     return str(status)
 

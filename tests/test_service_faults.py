@@ -40,7 +40,7 @@ from service_fixtures import (
 from kasparctl.game.session import EVENTS_FILE, read_records
 from kasparctl.service.reload import Outcome, request_reload
 
-IDLE = "waiting: long green starts the session"
+IDLE = "waiting: 'next' starts the session"
 PLACING = "step 1: placing the bags"
 pytestmark = pytest.mark.slow  # the service in real time
 

@@ -3,7 +3,7 @@
 `systemctl status kasparctl` shows it; it is the first thing a researcher (or
 whoever helps them on the phone) reads. One line, bounded: the stage in words,
 then each problem with its reason, e.g.
-"fault: long red resumes once it is fixed | voice failing: player exited with 1:
+"fault: see the journal; 'pause' resumes once cleared | voice failing: player exited with 1:
 ALSA lib confmisc.c:855:(parse_card) cannot find card '0' | ...".
 """
 
@@ -16,16 +16,18 @@ from kasparctl.game.records import FaultSource
 from kasparctl.game.recovery import reopen_record
 from kasparctl.game.state import GameState
 
+# The researcher's commands by name (next, pause, stop): a key of their own device, or a
+# hold on the children's keyfob, as configured (README: the researcher's gestures).
 STATUS_WORDS = {
-    "idle": "waiting: long green starts the session",
+    "idle": "waiting: 'next' starts the session",
     "placing": "step 1: placing the bags",
     "teaching": "step 2: teaching Kaspar to point",
     "revealing": "step 3: revealing the toys",
     "guessing": "step 4: Kaspar guesses the names",
     "farewell": "step 5: farewell",
     "finished": "session finished",
-    "paused": "paused: long red resumes",
-    "fault": "fault: see the journal; long red resumes once cleared",
+    "paused": "paused: 'pause' again resumes",
+    "fault": "fault: see the journal; 'pause' resumes once cleared",
     "stopped": "session stopped",
 }
 PROBLEM_WORDS = {
@@ -38,8 +40,8 @@ PROBLEM_WORDS = {
 }
 # What the researcher does about it: nothing more is played until it saves again.
 STORAGE_ADVICE = (
-    " - stop the session (both) or free the disk; nothing is played unsaved, what is on disk"
-    " is kept, and long red resumes once it saves again"
+    " - stop the session ('stop') or free the disk; nothing is played unsaved, what is on disk"
+    " is kept, and 'pause' resumes once it saves again"
 )
 # systemd keeps STATUS= whole, but a line this long is still read at a glance.
 DETAIL_LIMIT = 200

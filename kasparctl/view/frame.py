@@ -76,9 +76,9 @@ STAGE_STYLE: dict[str, Style] = {
 }
 
 STEP_HELP = {
-    "idle": "Waiting for the researcher's long green to start the session.",
-    "placing": "The children place the bagged toys; the researcher's long green moves on.",
-    "revealing": "The children reveal the toys; the researcher's long green moves on.",
+    "idle": "Waiting for the researcher's 'next' to start the session.",
+    "placing": "The children place the bagged toys; the researcher's 'next' moves on.",
+    "revealing": "The children reveal the toys; the researcher's 'next' moves on.",
     "guessing": "Kaspar is about to point and guess.",
     "farewell": "Kaspar thanks the children and says goodbye.",
 }
@@ -372,9 +372,9 @@ def _step_block(session: SessionView, width: int) -> list[Line]:
         left = session.step or "idle"
         style: Style = "warn" if stage == "paused" else "bad"
         text = (
-            f"The game is paused in {left}; the researcher's long red resumes it."
+            f"The game is paused in {left}; the researcher's 'pause' resumes it."
             if stage == "paused"
-            else f"Stopped by a fault in {left}; long red resumes once the hardware is back."
+            else f"Stopped by a fault in {left}; 'pause' resumes once the hardware is back."
         )
         return [_Row(width).add(text, style).line()]
     return [_Row(width).add(STEP_HELP.get(stage, stage)).line()]
