@@ -38,8 +38,12 @@ COMMANDS = ("sessions", "export", "report")
 
 def template(scratch: Path) -> tuple[bytes, list[dict[str, Any]]]:
     """A real demo session: its plan.json and its records as JSON objects."""
+    from kasparctl.log import configure_logging
     from kasparctl.sim.demo import DemoOptions, demo_config, run_demo
     from kasparctl.sim.teacher import Teacher
+
+    # stdout is this script's JSON: what the game logs goes to stderr, warnings only.
+    configure_logging("warning", "console", stream=sys.stderr)
 
     options = DemoOptions(
         state_dir=scratch,

@@ -232,6 +232,9 @@ class LiveBody:
         self._alive = False
         self._next_blink = self._next_idle = None
         self.mouth.silence()
+        # Every joint is home where it stands: not even the way home is sent after a cancel.
+        self._home.clear()
+        self._sent.clear()
 
     # --- the loop -----------------------------------------------------------------------
 
@@ -332,8 +335,9 @@ class LiveBody:
             self._gesture = self._relative(self._gesture, now, home, out)
         for joint, rest in home.items():
             # A joint a behaviour left away from home (cut short) goes back to it gently.
-            if joint not in out and abs(held[joint] - rest) > HOME_EPSILON_DEG:
-                out[joint] = held[joint] + (rest - held[joint]) * HOME_PULL
+            now_at = held.get(joint)
+            if now_at is not None and joint not in out and abs(now_at - rest) > HOME_EPSILON_DEG:
+                out[joint] = now_at + (rest - now_at) * HOME_PULL
         return {
             joint: self._within(joint, value) for joint, value in out.items() if joint in held
         }
