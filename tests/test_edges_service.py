@@ -61,7 +61,7 @@ def test_the_service_on_a_full_disk_stays_up_says_so_and_resumes_once_freed(
         mark = service.notify.mark()
         service.press("G")  # next: the step's record is refused
         status = service.notify.wait_for_status(lambda s: "CANNOT SAVE" in s, since=mark)
-        assert "No space left on device" in status and "stop the session (both)" in status
+        assert "No space left on device" in status and "stop the session ('stop')" in status
         service.stderr.wait_for(lambda line: spoken(line, PHRASES["fault"]["storage"]))
         # Left alone it waits: no crash, no loop of games resumed.
         mark = service.notify.mark()

@@ -7,6 +7,7 @@ shares no state with this process and a hung one is simply killed.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 from pathlib import Path
 
@@ -84,6 +85,7 @@ async def stream_through(
         assert playing.stdin is not None
         synth.stdin.write(text.encode())
         synth.stdin.close()
+        player_died = False
         while chunk := await synth.stdout.read(STREAM_CHUNK):
             try:
                 meter.feed(chunk)
@@ -93,9 +95,15 @@ async def stream_through(
             try:
                 await playing.stdin.drain()
             except (BrokenPipeError, ConnectionResetError):
-                break  # the player died: its exit status says why, below
+                player_died = True  # its exit status says why, below
+                break
         playing.stdin.close()
-        for process, what in ((synth, "espeak-ng"), (playing, "player")):
+        # A dead player (no sound card) is asked first: espeak-ng, no longer read, is
+        # blocked on its full pipe and would never end.
+        order = (
+            ((playing, "player"),) if player_died else ((synth, "espeak-ng"), (playing, "player"))
+        )
+        for process, what in order:
             await process.wait()
             if process.returncode != 0:
                 assert process.stderr is not None
@@ -103,6 +111,14 @@ async def stream_through(
                 raise VoiceError(f"{what} exited with {process.returncode}: {detail}")
         cut = False
     finally:
+        if synth.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                synth.kill()
+        if synth.stdout is not None:
+            # What it wrote and nobody read holds its pipe open (reading paused when the
+            # buffer filled): read to its end, or reaping it below would never return.
+            with contextlib.suppress(Exception):
+                await synth.stdout.read()
         await stop(synth)
         await stop(playing)
         meter.end(cut=cut)
