@@ -28,7 +28,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import msgspec
-from msgspec import UNSET
+from msgspec import UNSET, UnsetType
 
 from kasparctl.config import GameSettings
 from kasparctl.game.records import AlertRecord, ConfusedRecord, ReopenRecord, TrialRecord
@@ -129,13 +129,7 @@ def reopen_record(
     target = learned[-1]
     label = state.progress[target].learned
     assert label is not None  # learned_targets lists learned targets only
-    return ReopenRecord(
-        trial=state.trials,
-        target=settings.targets[target],
-        target_index=target,
-        name=settings.toys[label],
-        name_index=label,
-    )
+    return _reopen(settings, state.trials, target, label)
 
 
 def taken_back(state: GameState, settings: GameSettings) -> ReopenRecord | None:
@@ -146,13 +140,23 @@ def taken_back(state: GameState, settings: GameSettings) -> ReopenRecord | None:
     target = undo.reopened
     label = undo.progress.learned
     assert label is not None  # a re-opened target was learned
+    return _reopen(settings, undo.trial, target, label, taken_back=True)
+
+
+def _reopen(
+    settings: GameSettings,
+    trial: int,
+    target: int,
+    label: int,
+    taken_back: bool | UnsetType = UNSET,  # unset, as a re-open is written
+) -> ReopenRecord:
     return ReopenRecord(
-        trial=undo.trial,
+        trial=trial,
         target=settings.targets[target],
         target_index=target,
         name=settings.toys[label],
         name_index=label,
-        taken_back=True,
+        taken_back=taken_back,
     )
 
 
