@@ -80,3 +80,16 @@ async def eventually(check, timeout: float = 10.0):
         if time.monotonic() > deadline:
             raise AssertionError(f"condition not met within {timeout} s")
         await asyncio.sleep(0.02)
+
+
+def soon(check, timeout: float = 10.0):
+    """`eventually` for code outside an event loop: a write the servo does not answer
+    (HerkuleX's default ACK policy) returns before the emulator's thread has applied it."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not (result := check()):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"condition not met within {timeout} s")
+        time.sleep(0.02)
+    return result

@@ -10,6 +10,7 @@ import tomllib
 import pytest
 from bringup_fixtures import robot
 from emulators.herkulex import HerkulexEmulator
+from servo_fixtures import soon
 
 from hal.servos import herkulex as hx
 from kasparctl.cli import main
@@ -111,7 +112,7 @@ def test_a_pose_recorded_and_played_on_the_emulated_bus_stays_within_range_and_s
         assert main(["pose", "record", "point", "--config", str(path), "--group", "left_arm",
                      "--seconds", "0.3", "--json"]) == 0
         assert json.loads(capsys.readouterr().out)["joints"] == {"left_elbow": 61.1}
-        assert emulator.torque_on(10)  # held where it was posed
+        assert soon(lambda: emulator.torque_on(10))  # held where it was posed
         emulator.hand(10, None)
         # Back to rest by hand, then played.
         emulator.set_present(10, 527)

@@ -216,36 +216,39 @@ def _number(text: str) -> bool:
 # -- damaged sessions and records --------------------------------------------------------
 
 
+DAMAGED_PLANS = [
+    (b"", "plan.json: empty (expected the session's plan as a JSON object)"),
+    (b"[]", "plan.json: expected object, found array"),
+    (b'{"group": "G9", "plan": {"children": "Amira"}}', "plan.json: $.plan.children: expected array, found str"),
+    (b'{"group": "G9", "seed": "x"}', "plan.json: $.seed: expected int | null, found str"),
+    (b'{"group": "G\xff"}', "plan.json: not UTF-8 text"),
+    (b'{"group": "G9", "extra": ' + b"[" * 100_000, "plan.json: nested too deeply to be a plan"),
+    (b'{"group": ', "plan.json: not JSON (Input data was truncated)"),
+]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    ("content", "reason"),
-    [
-        (b"", "plan.json: empty (expected the session's plan as a JSON object)"),
-        (b"[]", "plan.json: expected object, found array"),
-        (b'{"group": "G9", "plan": {"children": "Amira"}}', "plan.json: $.plan.children: expected array, found str"),
-        (b'{"group": "G9", "seed": "x"}', "plan.json: $.seed: expected int | null, found str"),
-        (b'{"group": "G\xff"}', "plan.json: not UTF-8 text"),
-        (b'{"group": "G9", "extra": ' + b"[" * 100_000, "plan.json: nested too deeply to be a plan"),
-        (b'{"group": ', "plan.json: not JSON (Input data was truncated)"),
-    ],
-)
-def test_a_damaged_plan_is_listed_and_every_other_session_goes_on(
-    study: Study, tmp_path: Path, content: bytes, reason: str
-) -> None:
+def test_damaged_plans_are_listed_and_every_other_session_goes_on(study: Study, tmp_path: Path) -> None:
+    # Every damage at once, each in its own copy of a session beside the whole study: one
+    # damage must neither hide another nor stop the sessions that are whole.
     state = copy_of(study, tmp_path)
-    damaged = first_session(state)
-    (damaged / "plan.json").write_bytes(content)
+    original = first_session(state)
+    expected = []
+    for number, (content, reason) in enumerate(DAMAGED_PLANS):
+        damaged = shutil.copytree(original, state / "sessions" / f"2099010{number}T000000-D")
+        (damaged / "plan.json").write_bytes(content)
+        expected.append(f"{damaged}/{reason}")
     listed = run(["sessions", "--state-dir", str(state), "--json"])
     assert listed.returncode == 0, listed.stderr
     no_traceback(listed.stderr)
     rows = json.loads(listed.stdout)
-    bad = [r for r in rows if r["status"] == "damaged"]
-    assert [r["reason"] for r in bad] == [f"{damaged}/{reason}"]
-    assert len(rows) == len(study.planned)
+    assert sorted(r["reason"] for r in rows if r["status"] == "damaged") == sorted(expected)
+    assert len(rows) == len(study.planned) + len(DAMAGED_PLANS)
     exported = run(["export", "--state-dir", str(state), "--csv", str(tmp_path / "t.csv")])
     assert exported.returncode == 0, exported.stderr
-    assert f"session left out, damaged: {damaged}/{reason}" in exported.stderr
-    assert f"from {len(study.planned) - 1} sessions" in exported.stderr
+    for reason in expected:
+        assert f"session left out, damaged: {reason}" in exported.stderr
+    assert f"from {len(study.planned)} sessions" in exported.stderr
     reported = run(["report", "--state-dir", str(state), "--out", str(tmp_path / "r")])
     assert reported.returncode == 0, reported.stderr
     no_traceback(exported.stderr + reported.stderr)
@@ -258,26 +261,29 @@ def test_a_session_without_a_plan_is_listed_as_damaged(study: Study, tmp_path: P
     assert "damaged: " in capsys.readouterr().out
 
 
+DAMAGED_RECORDS = [
+    (b'{"kind": "trial", "seq": 5, "trial": "five"}', "not a valid record (Expected `int`, got `str` - at `$.trial`)"),
+    (b'{"kind": "step", "seq": 5, "to": "\xff\xfe"}', "not a JSON record (not UTF-8)"),
+    (b"[" * 100_000, "not a JSON record (nested too deeply)"),
+    (b'{"kind": "session", "seq": 5, "event": "start", "plan": ' + b"[" * 5000 + b"]" * 5000 + b"}", None),
+    (b'{"kind": "press", "seq": 5, "button": "green", "at": 1.0, "ignored": "' + b"x" * (17 << 20) + b'"}', "longer than"),
+]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    ("line", "why"),
-    [
-        (b'{"kind": "trial", "seq": 5, "trial": "five"}', "not a valid record (Expected `int`, got `str` - at `$.trial`)"),
-        (b'{"kind": "step", "seq": 5, "to": "\xff\xfe"}', "not a JSON record (not UTF-8)"),
-        (b"[" * 100_000, "not a JSON record (nested too deeply)"),
-        (b'{"kind": "session", "seq": 5, "event": "start", "plan": ' + b"[" * 5000 + b"]" * 5000 + b"}", None),
-        (b'{"kind": "press", "seq": 5, "button": "green", "at": 1.0, "ignored": "' + b"x" * (17 << 20) + b'"}', "longer than"),
-    ],
-)
-def test_a_damaged_record_is_a_warning_never_a_traceback(
-    study: Study, tmp_path: Path, line: bytes, why: str | None
-) -> None:
+def test_damaged_records_are_warnings_never_a_traceback(study: Study, tmp_path: Path) -> None:
+    # Each damaged line as line 5 of a different session, all in one state directory.
     state = copy_of(study, tmp_path)
-    session = first_session(state)
-    records = session / "records.jsonl"
-    lines = records.read_bytes().splitlines(keepends=True)
-    lines.insert(4, line + b"\n")
-    records.write_bytes(b"".join(lines))
+    sessions = sorted((state / "sessions").iterdir())
+    assert len(sessions) >= len(DAMAGED_RECORDS)
+    warnings = []
+    for session, (line, why) in zip(sessions, DAMAGED_RECORDS, strict=False):
+        records = session / "records.jsonl"
+        lines = records.read_bytes().splitlines(keepends=True)
+        lines.insert(4, line + b"\n")
+        records.write_bytes(b"".join(lines))
+        if why is not None:
+            warnings.append(f"{records}: line 5: skipped, {why}")
     for argv in (
         ["sessions", "--state-dir", str(state)],
         ["export", "--state-dir", str(state), "--csv", str(tmp_path / "t.csv"), "--events", str(tmp_path / "e.csv")],
@@ -286,10 +292,8 @@ def test_a_damaged_record_is_a_warning_never_a_traceback(
         result = run(argv)
         assert result.returncode == 0, result.stderr
         no_traceback(result.stderr)
-        if why is not None:
-            assert f"{records}: line 5: skipped, {why}" in result.stderr or (
-                why == "longer than" and f"{records}: line 5: skipped, longer than" in result.stderr
-            )
+        for warning in warnings:
+            assert warning in result.stderr, (argv[0], warning)
 
 
 def test_a_state_directory_the_user_may_not_read_is_one_line(study: Study, tmp_path: Path) -> None:
@@ -306,7 +310,7 @@ def test_a_state_directory_the_user_may_not_read_is_one_line(study: Study, tmp_p
     for argv in (
         ["sessions", "--state-dir", str(state)],
         ["export", "--state-dir", str(state), "--csv", str(tmp_path / "t.csv")],
-        ["report", "--state-dir", str(state), "--out", str(tmp_path / "r")],
+        ["report", "--state-dir", str(state), "--out", str(tmp_path / "r"), "--bootstrap", "100"],
     ):
         result = subprocess.run([*prefix, *KASPARCTL, *argv], capture_output=True, text=True, cwd=ROOT, timeout=120)
         assert result.returncode == 1, result.stderr
@@ -367,43 +371,7 @@ def test_a_simulation_of_hours_is_refused_at_once_with_what_to_do() -> None:
     assert sweep.returncode == 1 and "expected at most 20,000,000" in sweep.stderr
 
 
-@pytest.mark.slow
-def test_a_long_simulation_holds_only_totals(tmp_path: Path) -> None:
-    """60,000 groups: the statistics accumulate; memory stays that of a few groups (holding
-    their 180,000 problems' records took about 190 MB)."""
-    bench = importlib.util.spec_from_file_location("scale", ROOT / "bench" / "bench_research_scale.py")
-    assert bench is not None and bench.loader is not None
-    module = importlib.util.module_from_spec(bench)
-    bench.loader.exec_module(module)
-    # The process's own peak (VmHWM), not ru_maxrss: that counts the test runner it forked from.
-    _seconds, peak_mb, code = module.measure(["simulate", "--groups", "60000", "--seed", "1", "--json"])
-    assert code == 0
-    assert peak_mb < 120, peak_mb
-
-
-# -- scale ------------------------------------------------------------------------------------
-
-
-@pytest.mark.slow
-def test_200_mb_of_records_in_time_and_memory(tmp_path: Path) -> None:
-    """The bench: sessions, export and report each under 60 s and 300 MB on 200 MB."""
-    result = subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "bench_research_scale.py"), "--mb", "200", "--json", "--dir", str(tmp_path)],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stderr
-    measured = json.loads(result.stdout)
-    assert measured["records_mb"] >= 200
-    for name, numbers in measured["commands"].items():
-        assert numbers["exit_code"] == 0, name
-        assert numbers["seconds"] < 60 and numbers["peak_rss_mb"] < 300, (name, numbers)
-    # `sessions` under a 700 MB address-space limit: it works, and says so.
-    limited = run(
-        ["sessions", "--state-dir", str(tmp_path / "state")],
-        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (700 << 20, 700 << 20)),
-    )
-    assert limited.returncode == 0, limited.stderr
-    assert "finished" in limited.stdout
+# -- scale: bench/bench_research_scale.py measures 200 MB of records (sessions, export,
+# report, sessions under a 700 MB address space) and simulate --groups 60000 against
+# their targets; timings are not asserted here.
+# ------------------------------------------------------------------------------------

@@ -102,6 +102,7 @@ def test_old_sessions_read_with_the_mapping() -> None:
 MODES = ("spoken", "body", "both", "none")
 
 
+@pytest.mark.live_body  # the must-show: each mode with the body as configured
 def test_a_demo_in_each_mode_exported_and_reported_side_by_side(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -174,12 +174,18 @@ async def test_fallback_to_espeak_ng_when_pyttsx3_is_broken(tmp_path, monkeypatc
 
 class DroppingEngine:
     """A pyttsx3 engine that renders no audio for its first `drops` lines, as libespeak-ng
-    now and then does, then a short tone."""
+    now and then does, then a short tone.
 
-    def __init__(self, drops: int) -> None:
+    As pyttsx3 2.99 over libespeak-ng does, runAndWait returns before the WAV exists: it
+    is written `delay` seconds later on another thread, then "finished-utterance" is sent.
+    """
+
+    def __init__(self, drops: int, delay: float = 0.0) -> None:
         self.drops = drops
+        self.delay = delay
         self.renders: list[str] = []
         self._job: tuple[str, str] | None = None
+        self._callbacks: dict[str, list] = {}
 
     def setProperty(self, name, value) -> None:
         pass
@@ -188,10 +194,12 @@ class DroppingEngine:
         return [SimpleNamespace(id="gmw/en-GB", name="English", languages=["en-gb"])]
 
     def connect(self, topic, cb):
-        return object()
+        self._callbacks.setdefault(topic, []).append(cb)
+        return (topic, cb)
 
     def disconnect(self, token) -> None:
-        pass
+        topic, cb = token
+        self._callbacks[topic].remove(cb)
 
     def save_to_file(self, text: str, filename: str) -> None:
         self._job = (text, filename)
@@ -201,11 +209,32 @@ class DroppingEngine:
         text, filename = self._job
         self.renders.append(text)
         samples = b"" if len(self.renders) <= self.drops else b"\x10\x00" * 4000
-        with wave.open(filename, "wb") as audio:
-            audio.setnchannels(1)
-            audio.setsampwidth(2)
-            audio.setframerate(22050)
-            audio.writeframes(samples)
+
+        def synthesise() -> None:
+            with wave.open(filename, "wb") as audio:
+                audio.setnchannels(1)
+                audio.setsampwidth(2)
+                audio.setframerate(22050)
+                audio.writeframes(samples)
+            for cb in list(self._callbacks.get("finished-utterance", [])):
+                cb(name=None, completed=True)
+
+        threading.Timer(self.delay, synthesise).start()
+
+
+async def test_a_line_written_after_run_and_wait_returns_is_waited_for(tmp_path):
+    # Read at once, this file was missing (or empty) and the line fell back to
+    # espeak-ng: seen on a loaded machine with the real pyttsx3.
+    engine = DroppingEngine(drops=0, delay=0.3)
+    voice = Voice(
+        VoiceSettings(engine="pyttsx3", wav_dir=str(tmp_path)), engine_factory=lambda: engine
+    )
+    try:
+        spoken = await say(voice, "written late")
+    finally:
+        await voice.close()
+    assert (spoken.status, spoken.via, spoken.error) == (SpokenStatus.FINISHED, "pyttsx3", None)
+    assert len(frames(spoken.wav)) == 4000
 
 
 async def test_a_line_rendered_empty_once_is_rendered_again_on_pyttsx3(tmp_path):

@@ -18,6 +18,11 @@ pyttsx3 traps handled here (pyttsx3 2.99, espeak driver):
 - the driver print()s "Audio saved to ..." on stdout, which would corrupt the
   JSON log lines: its module-level print is replaced by a debug log (the fd is
   left alone: redirecting fd 1 would swallow our own logs too);
+- runAndWait does not wait for a save_to_file: libespeak-ng is started in its
+  asynchronous mode (AUDIO_OUTPUT_RETRIEVAL), runAndWait returns once Synth is
+  queued, and the WAV is written later on libespeak-ng's own thread, followed by
+  a "finished-utterance" notice. The render waits for that notice; read at once,
+  the file was missing or empty on a loaded machine;
 - a render that returns without a file (the silent failure) counts as a failure.
 """
 
@@ -41,6 +46,9 @@ from hal.voice.sinks import check_wav, wav_frames
 log = structlog.get_logger("kaspar.voice")
 
 RENDER_ATTEMPTS = 2
+# How often a render waiting for libespeak-ng's "finished-utterance" looks whether the
+# engine was retired meanwhile (the voice's utterance timeout decides when it hangs).
+FINISH_POLL_S = 0.05
 
 
 class Pyttsx3Voice(Protocol):
@@ -74,7 +82,8 @@ class Pyttsx3Engine(Protocol):
         ...
 
     def connect(self, topic: str, cb: Callable[..., None]) -> object:
-        """Call `cb` on each `topic` event ("error"); returns the token for disconnect."""
+        """Call `cb` on each `topic` event ("error", "finished-utterance"), with keyword
+        arguments only; returns the token for disconnect."""
         ...
 
     def disconnect(self, token: object) -> None:
@@ -244,20 +253,34 @@ class Pyttsx3Thread:
 
     def _render_once(self, engine: Pyttsx3Engine, job: _Job) -> None:
         errors: list[BaseException | None] = []
+        finished = threading.Event()
+        endings: list[bool] = []  # "completed" of each finished-utterance
 
         def on_error(name: object = None, exception: BaseException | None = None) -> None:
             errors.append(exception)
+            finished.set()
 
-        token = engine.connect("error", on_error)
+        def on_finished(name: object = None, completed: bool = True) -> None:
+            endings.append(completed)
+            finished.set()
+
+        tokens = [engine.connect("error", on_error),
+                  engine.connect("finished-utterance", on_finished)]
         try:
             with contextlib.suppress(FileNotFoundError):
                 job.path.unlink()
             engine.save_to_file(job.text, str(job.path))
             engine.runAndWait()
+            while not finished.wait(FINISH_POLL_S):
+                if self._retired:
+                    raise VoiceError("pyttsx3 engine retired before the line was rendered")
         finally:
-            engine.disconnect(token)
+            for token in tokens:
+                engine.disconnect(token)
         if errors:
             raise VoiceError(f"pyttsx3 reported {errors[0]!r}")
+        if not all(endings):
+            raise VoiceError("pyttsx3 stopped the line before its end")
         if wav_frames(job.path) == 0:
             raise EmptyRender("pyttsx3 wrote an empty WAV")
         check_wav(job.path, "pyttsx3")
