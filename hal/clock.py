@@ -13,6 +13,12 @@ import time
 from collections.abc import Iterator
 from typing import Protocol
 
+import structlog
+
+from hal.timerfd import MonotonicTimer, TimerUnavailable
+
+log = structlog.get_logger("kaspar.clock")
+
 
 class Clock(Protocol):
     """Where the HAL and the game read the time and wait; injected, never global."""
@@ -48,6 +54,80 @@ class LoopClock:
     async def sleep(self, seconds: float) -> None:
         """asyncio.sleep on the loop: real seconds, or simulated ones under simtime."""
         await asyncio.sleep(seconds)
+
+
+class Alarm:
+    """Waits until a moment of a clock, as close to it as the kernel allows.
+
+    On the real clock of a real event loop a timerfd wakes the loop at the moment
+    (hal.timerfd: asyncio's own timers are up to 1 ms late); on a simulated loop or
+    any other clock, and where there is no timerfd, it is the clock's own sleep.
+    Not for several tasks at once: one alarm per loop that waits on it.
+    """
+
+    def __init__(self, clock: Clock) -> None:
+        """An alarm on `clock`; its timer is opened at the first wait."""
+        self._clock = clock
+        self._timer: MonotonicTimer | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._rung: asyncio.Future[None] | None = None
+        self._plain = not isinstance(clock, MonotonicClock | LoopClock)
+
+    async def sleep_until(self, moment: float) -> None:
+        """Return at `moment` of the clock (at once when it has passed); cancellable."""
+        loop = asyncio.get_running_loop()
+        timer = None if self._plain else self._timer_on(loop)
+        if timer is None:
+            await self._clock.sleep(max(0.0, moment - self._clock.now()))
+            return
+        self._rung = rung = loop.create_future()
+        # Arming resets the timer's count of expiries: an old one cannot ring this wait.
+        timer.arm(moment)
+        try:
+            await rung
+        finally:
+            self._rung = None
+
+    def _ring(self) -> None:
+        # Two syscalls a tick: the arm and this read. The reader stays registered
+        # between waits; epoll may report an expiry that a re-arm has since reset.
+        if self._timer is None or not self._timer.take():
+            return
+        if self._rung is not None and not self._rung.done():
+            self._rung.set_result(None)
+
+    def _timer_on(self, loop: asyncio.AbstractEventLoop) -> MonotonicTimer | None:
+        if self._timer is not None and self._loop is loop:
+            return self._timer
+        self.close()
+        # A loop with a time of its own (kasparctl.sim.simtime: virtual or scaled) is not on
+        # the kernel's clock: its timers jump or run faster, they do not wait.
+        if type(loop).time is not asyncio.BaseEventLoop.time:
+            self._plain = True
+            return None
+        try:
+            timer = MonotonicTimer()
+        except TimerUnavailable as error:
+            log.info("no high-resolution timer; waiting on the event loop", error=str(error))
+            self._plain = True
+            return None
+        try:
+            loop.add_reader(timer.fileno, self._ring)
+        except NotImplementedError:  # a loop without readers (Windows' proactor)
+            timer.close()
+            self._plain = True
+            return None
+        self._timer, self._loop = timer, loop
+        return timer
+
+    def close(self) -> None:
+        """Release the timer; a later sleep_until opens another."""
+        timer, loop, self._timer, self._loop = self._timer, self._loop, None, None
+        if timer is None:
+            return
+        if loop is not None and not loop.is_closed():
+            loop.remove_reader(timer.fileno)
+        timer.close()
 
 
 @contextlib.contextmanager

@@ -33,7 +33,7 @@ from typing import Any, Protocol
 
 import structlog
 
-from hal.clock import Clock
+from hal.clock import Alarm, Clock
 from hal.errors import HalError
 from hal.servos.api import Fault, Pose
 from hal.servos.settings import ServoSettings
@@ -147,6 +147,8 @@ class LiveBody:
         self._next_blink: float | None = None
         self._next_idle: float | None = None
         self._task: asyncio.Task[None] | None = None
+        # Wakes the loop on its schedule to the microsecond on the robot (hal.clock.Alarm).
+        self._alarm = Alarm(clock)
         self._noted: set[tuple[str, str]] = set()
         self._fault_seen = False
         # Where each joint rests between behaviours: wherever the game (or anyone but the
@@ -177,6 +179,7 @@ class LiveBody:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
+        self._alarm.close()
 
     def set_alive(self, alive: bool) -> None:
         """Allow or forbid blinks, idle movements and gaze (they end at once when forbidden)."""
@@ -244,11 +247,10 @@ class LiveBody:
         while True:
             tick += 1
             due = begin + tick * self.period
-            delay = due - self._clock.now()
-            if delay < -self.period:  # far behind: start the schedule again, no burst
+            if due - self._clock.now() < -self.period:  # far behind: start again, no burst
                 begin, tick = self._clock.now(), 0
-                delay = 0.0
-            await self._clock.sleep(max(0.0, delay))
+                due = begin
+            await self._alarm.sleep_until(due)
             now = self._clock.now()
             if self.lateness is not None:
                 self.lateness.append(now - due)
