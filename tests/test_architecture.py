@@ -31,7 +31,8 @@ KASPARCTL_FLOORS: dict[str, int] = {
     "kasparctl.__main__": 8,
 }
 # What the game (and everything else that is not a factory's caller) may see of hal.
-HAL_INTERFACES = ("hal", "hal.errors", "hal.clock", "hal.keyfob.gestures")
+# hal.timerfd is the kernel's timer under hal.clock: no device, no simulated twin.
+HAL_INTERFACES = ("hal", "hal.errors", "hal.clock", "hal.timerfd", "hal.keyfob.gestures")
 HAL_DEVICE_ROOMS = ("hal.servos", "hal.keyfob", "hal.voice")
 # Rooms that assemble real or simulated hardware and so may name implementations.
 ASSEMBLERS = ("hal.build", "kasparctl.sim", "kasparctl.service", "kasparctl.commands")

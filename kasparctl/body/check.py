@@ -16,8 +16,23 @@ from hal.servos.settings import ServoSettings
 from kasparctl.body.behaviours import MINIMUM_JERK_PEAK, Behaviour
 
 
-def problems(library: Mapping[str, Behaviour], servos: ServoSettings) -> list[str]:
-    """Every problem of every behaviour on this robot, one line each; empty when all fit."""
+def absent_joints(library: Mapping[str, Behaviour], servos: ServoSettings) -> list[str]:
+    """The joints the behaviours move that this robot does not have (sorted)."""
+    present = {joint.name for joint in servos.joints}
+    named = {name for behaviour in library.values() for _, pose in behaviour.keyframes
+             for name in pose}
+    return sorted(named - present)
+
+
+def problems(
+    library: Mapping[str, Behaviour], servos: ServoSettings, *, absent_is_problem: bool = True
+) -> list[str]:
+    """Every problem of every behaviour on this robot, one line each; empty when all fit.
+
+    A joint the robot lacks is skipped when played: a problem for `behaviour check`,
+    which shows what an engineer's file does, not for a smaller robot's `check`
+    (absent_is_problem=False; absent_joints names them).
+    """
     joints = {joint.name: joint for joint in servos.joints}
     found: list[str] = []
     for behaviour in library.values():
@@ -28,7 +43,8 @@ def problems(library: Mapping[str, Behaviour], servos: ServoSettings) -> list[st
                 joint = joints.get(name)
                 at = f"{where}, keyframe {number} (at {time:g} s), joint {name}"
                 if joint is None:
-                    if name not in missing:  # once per behaviour, at its first keyframe
+                    # Once per behaviour, at its first keyframe.
+                    if absent_is_problem and name not in missing:
                         missing.add(name)
                         found.append(f"{at}: not a joint of this robot (skipped when played)")
                     continue

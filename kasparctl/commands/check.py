@@ -1,8 +1,10 @@
 """`kasparctl check`: is this robot ready for a session? A table, and an exit code.
 
-Validates the configuration and phrases, pings and reads every configured servo
-(its temperature, voltage, error bits; an impossible reading fails; nothing
-moves on a powered robot), finds the keyfob, and speaks a test line. Usable
+Validates the configuration and phrases, the body's behaviours against the
+configured joints (as `behaviour check`: a bad file would leave Kaspar still in
+front of the children), pings and reads every configured servo (its
+temperature, voltage, error bits; an impossible reading fails; nothing moves on
+a powered robot), finds the keyfob, and speaks a test line. Usable
 over ssh by an engineer; exit 1 when anything is wrong.
 """
 
@@ -20,6 +22,8 @@ from hal.servos.api import JointStatus
 from hal.servos.bus import open_failure
 from hal.servos.joints import Joints
 from hal.servos.settings import ServoSettings
+from kasparctl.body.behaviours import BehaviourError, load_library
+from kasparctl.body.check import absent_joints, problems
 from kasparctl.config import (
     Config,
     ConfigError,
@@ -77,11 +81,29 @@ def run(arguments: argparse.Namespace) -> int:
     results = [
         Result("configuration", True, f"{path} ({len(config.sessions)} planned sessions)"),
         Result("phrases", True, phrasebook.source),
+        *_body(config),
         *([] if servo_backend_given(path) else [Result("servos", False, NO_BACKEND)]),
         *asyncio.run(_hardware(config, speak=not arguments.quiet)),
     ]
     _print_table(results)
     return 0 if all(result.ok for result in results) else 1
+
+
+def _body(config: Config) -> list[Result]:
+    if not config.body.enabled:
+        return [Result("body", True, "still ([body] enabled = false)")]
+    try:
+        library = load_library(config.body.behaviours_dir)
+    except BehaviourError as error:
+        return [Result("body", False, str(error))]
+    found = problems(library, config.servos, absent_is_problem=False)
+    if found:
+        return [Result("body", False, line) for line in found]
+    fit = f"behaviours that fit this robot: {len(library)}"
+    absent = absent_joints(library, config.servos)
+    if absent:
+        fit += f" (joints it lacks, skipped when played: {', '.join(absent)})"
+    return [Result("body", True, fit)]
 
 
 async def _hardware(config: Config, speak: bool) -> list[Result]:
