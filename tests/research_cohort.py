@@ -46,7 +46,21 @@ def participants_csv() -> str:
     return "\n".join(lines) + "\n"
 
 
+_BUILT: dict[Path, Cohort] = {}
+
+
 def make_cohort(root: Path) -> Cohort:
+    """The cohort's sessions in `root`: played once per test run (beside `root`, in the
+    run's temporary directory), copied for each module that asks, which may change its copy."""
+    original = _BUILT.get(root.parent)
+    if original is None:
+        original = _BUILT[root.parent] = _play_cohort(root.parent / "cohort-played-once")
+    state_dir = shutil.copytree(original.state_dir, root / "state")
+    participants = shutil.copy(original.participants, root / "participants.csv")
+    return Cohort(state_dir, Path(participants))
+
+
+def _play_cohort(root: Path) -> Cohort:
     state_dir = root / "state"
     (state_dir / "sessions").mkdir(parents=True)
     seed = 100

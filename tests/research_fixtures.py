@@ -121,7 +121,20 @@ async def fault_then_stop(rig: DemoRig) -> None:
     await rig.command("stop")
 
 
+_BUILT: dict[Path, Study] = {}
+
+
 def make_study(root: Path) -> Study:
+    """The study's sessions in `root`/state: played once per test run (beside `root`, in the
+    run's temporary directory), copied for each module that asks, which may change its copy."""
+    original = _BUILT.get(root.parent)
+    if original is None:
+        original = _BUILT[root.parent] = _play_study(root.parent / "study-played-once")
+    state_dir = shutil.copytree(original.state_dir, root / "state")
+    return Study(state_dir, dict(original.planned))
+
+
+def _play_study(root: Path) -> Study:
     state_dir = root / "state"
     (state_dir / "sessions").mkdir(parents=True)
     planned_by_id = {}
