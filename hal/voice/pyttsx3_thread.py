@@ -23,6 +23,11 @@ pyttsx3 traps handled here (pyttsx3 2.99, espeak driver):
   queued, and the WAV is written later on libespeak-ng's own thread, followed by
   a "finished-utterance" notice. The render waits for that notice; read at once,
   the file was missing or empty on a loaded machine;
+- espeak_Cancel, which runAndWait's endLoop calls when libespeak-ng is still
+  busy, empties its queue: the voice, rate and volume of a new engine, queued
+  with setProperty, were lost now and then (its first line at the default
+  rate). They are set on the library directly once it is idle, and each line
+  starts only when it is idle;
 - a render that returns without a file (the silent failure) counts as a failure.
 """
 
@@ -35,7 +40,7 @@ import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import structlog
 
@@ -208,9 +213,7 @@ class Pyttsx3Thread:
     def _run(self) -> None:
         try:
             engine = self._factory()
-            engine.setProperty("voice", _voice_id(engine, self._settings.voice))
-            engine.setProperty("rate", self._settings.rate)
-            engine.setProperty("volume", self._settings.volume)
+            _configure(engine, self._settings)
             self._engine = engine
         except Exception as error:
             self.failure = f"pyttsx3 could not start: {error!r}"
@@ -266,6 +269,7 @@ class Pyttsx3Thread:
 
         tokens = [engine.connect("error", on_error),
                   engine.connect("finished-utterance", on_finished)]
+        _wait_for_libespeak(engine)
         try:
             with contextlib.suppress(FileNotFoundError):
                 job.path.unlink()
@@ -295,6 +299,49 @@ class Pyttsx3Thread:
                 return
             if job is not None:
                 job.settle(error)
+
+
+def _libespeak(engine: Pyttsx3Engine) -> Any | None:
+    """pyttsx3's ctypes binding of libespeak-ng when `engine` runs on its espeak driver."""
+    driver = getattr(getattr(engine, "proxy", None), "_driver", None)
+    if type(driver).__module__ != "pyttsx3.drivers.espeak":
+        return None
+    from pyttsx3.drivers import _espeak
+
+    return _espeak
+
+
+def _wait_for_libespeak(engine: Pyttsx3Engine) -> None:
+    """Return once libespeak-ng's own thread has done every command queued so far.
+
+    runAndWait's endLoop cancels libespeak-ng's queue when it is still busy
+    (espeak_Cancel), dropping what waits in it: the rate a new engine had just set
+    was lost, and its first line came out at the default rate. Blocks this thread
+    only (a hung library is the voice's utterance timeout's to handle).
+    """
+    library = _libespeak(engine)
+    if library is not None:
+        library.Synchronize()
+
+
+def _configure(engine: Pyttsx3Engine, settings: VoiceSettings) -> None:
+    """The voice, rate and volume, in force before the first line is rendered."""
+    properties = (
+        ("voice", _voice_id(engine, settings.voice)),
+        ("rate", settings.rate),
+        ("volume", settings.volume),
+    )
+    driver = getattr(getattr(engine, "proxy", None), "_driver", None)
+    if _libespeak(engine) is None or driver is None:
+        for name, value in properties:
+            engine.setProperty(name, value)  # queued, applied by the first runAndWait
+        return
+    # engine.setProperty would queue them for runAndWait, whose endLoop can cancel them
+    # (see _wait_for_libespeak): set on libespeak-ng directly, after what came before.
+    _wait_for_libespeak(engine)
+    for name, value in properties:
+        driver.setProperty(name, value)
+    _wait_for_libespeak(engine)
 
 
 def _voice_id(engine: Pyttsx3Engine, wanted: str) -> str:
