@@ -222,30 +222,29 @@ class DroppingEngine:
         threading.Timer(self.delay, synthesise).start()
 
 
-async def test_a_line_written_after_run_and_wait_returns_is_waited_for(tmp_path):
-    # Read at once, this file was missing (or empty) and the line fell back to
-    # espeak-ng: seen on a loaded machine with the real pyttsx3.
-    engine = DroppingEngine(drops=0, delay=0.3)
+async def say_with(engine: DroppingEngine, tmp_path: Path, text: str):
+    """`text` said by a pyttsx3 voice whose engine is `engine`."""
     voice = Voice(
         VoiceSettings(engine="pyttsx3", wav_dir=str(tmp_path)), engine_factory=lambda: engine
     )
     try:
-        spoken = await say(voice, "written late")
+        return await say(voice, text)
     finally:
         await voice.close()
+
+
+async def test_a_line_written_after_run_and_wait_returns_is_waited_for(tmp_path):
+    # Read at once, this file was missing (or empty) and the line fell back to
+    # espeak-ng: seen on a loaded machine with the real pyttsx3.
+    engine = DroppingEngine(drops=0, delay=0.3)
+    spoken = await say_with(engine, tmp_path, "written late")
     assert (spoken.status, spoken.via, spoken.error) == (SpokenStatus.FINISHED, "pyttsx3", None)
     assert len(frames(spoken.wav)) == 4000
 
 
 async def test_a_line_rendered_empty_once_is_rendered_again_on_pyttsx3(tmp_path):
     engine = DroppingEngine(drops=1)
-    voice = Voice(
-        VoiceSettings(engine="pyttsx3", wav_dir=str(tmp_path)), engine_factory=lambda: engine
-    )
-    try:
-        spoken = await say(voice, "the second line")
-    finally:
-        await voice.close()
+    spoken = await say_with(engine, tmp_path, "the second line")
     assert (spoken.status, spoken.via, spoken.error) == (SpokenStatus.FINISHED, "pyttsx3", None)
     assert engine.renders == ["the second line", "the second line"]
     assert len(frames(spoken.wav)) == 4000
@@ -253,13 +252,7 @@ async def test_a_line_rendered_empty_once_is_rendered_again_on_pyttsx3(tmp_path)
 
 async def test_a_line_rendered_empty_twice_falls_back_to_espeak_ng(tmp_path):
     engine = DroppingEngine(drops=2)
-    voice = Voice(
-        VoiceSettings(engine="pyttsx3", wav_dir=str(tmp_path)), engine_factory=lambda: engine
-    )
-    try:
-        spoken = await say(voice, "never heard from pyttsx3")
-    finally:
-        await voice.close()
+    spoken = await say_with(engine, tmp_path, "never heard from pyttsx3")
     assert (spoken.status, spoken.via) == (SpokenStatus.FINISHED, "espeak-ng")
     assert "empty WAV" in (spoken.error or "")
     assert engine.renders == ["never heard from pyttsx3"] * 2
