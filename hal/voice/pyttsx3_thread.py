@@ -301,14 +301,10 @@ class Pyttsx3Thread:
                 job.settle(error)
 
 
-def _libespeak(engine: Pyttsx3Engine) -> Any | None:
-    """pyttsx3's ctypes binding of libespeak-ng when `engine` runs on its espeak driver."""
+def _espeak_driver(engine: Pyttsx3Engine) -> Any | None:
+    """pyttsx3's espeak driver under `engine`; None for any other engine (the tests' own)."""
     driver = getattr(getattr(engine, "proxy", None), "_driver", None)
-    if type(driver).__module__ != "pyttsx3.drivers.espeak":
-        return None
-    from pyttsx3.drivers import _espeak
-
-    return _espeak
+    return driver if type(driver).__module__ == "pyttsx3.drivers.espeak" else None
 
 
 def _wait_for_libespeak(engine: Pyttsx3Engine) -> None:
@@ -319,9 +315,10 @@ def _wait_for_libespeak(engine: Pyttsx3Engine) -> None:
     was lost, and its first line came out at the default rate. Blocks this thread
     only (a hung library is the voice's utterance timeout's to handle).
     """
-    library = _libespeak(engine)
-    if library is not None:
-        library.Synchronize()
+    if _espeak_driver(engine) is not None:
+        from pyttsx3.drivers import _espeak
+
+        _espeak.Synchronize()
 
 
 def _configure(engine: Pyttsx3Engine, settings: VoiceSettings) -> None:
@@ -331,8 +328,8 @@ def _configure(engine: Pyttsx3Engine, settings: VoiceSettings) -> None:
         ("rate", settings.rate),
         ("volume", settings.volume),
     )
-    driver = getattr(getattr(engine, "proxy", None), "_driver", None)
-    if _libespeak(engine) is None or driver is None:
+    driver = _espeak_driver(engine)
+    if driver is None:
         for name, value in properties:
             engine.setProperty(name, value)  # queued, applied by the first runAndWait
         return
