@@ -16,7 +16,7 @@ from typing import Any
 
 import msgspec
 
-from kasparctl.game.records import AnyRecord
+from kasparctl.game.records import AnyRecord, Record
 from kasparctl.game.storage import append_durably, fsync_directory, truncate
 
 TORN_SUFFIX = ".torn"
@@ -129,8 +129,8 @@ def record_to_plain(record: AnyRecord) -> dict[str, Any]:
     return plain
 
 
-def encode_record(record: AnyRecord) -> bytes:
-    """One record as its line of records.jsonl, without the newline."""
+def encode_record(record: Record) -> bytes:
+    """One record (of any kind) as its line of records.jsonl, without the newline."""
     return _encoder.encode(record)
 
 

@@ -21,7 +21,7 @@ import msgspec
 import structlog
 
 from kasparctl.config import Config, GameSettings, ProfileSettings, SessionPlan
-from kasparctl.game.jsonl import line_seq, read_json_lines, read_records
+from kasparctl.game.jsonl import encode_record, line_seq, read_json_lines, read_records
 from kasparctl.game.records import SessionEvent, SessionRecord
 from kasparctl.game.session import (
     LEARNER_FIELDS,
@@ -42,8 +42,6 @@ from kasparctl.game.storage import RecordLog, SessionError, storage_failed
 from kasparctl.learning.learner import PLAIN_DATA_ERRORS, LearnerError, LearnerParams
 
 log = structlog.get_logger(__name__)
-
-_encoder = msgspec.json.Encoder()
 
 
 def find_unfinished(state_dir: Path) -> Path | None:
@@ -234,7 +232,7 @@ def abandon(directory: Path, reason: str, clock: float = 0.0) -> int:
         record = SessionRecord(event=SessionEvent.ABANDONED, reason=reason, state=step)
         records = RecordLog(records_path)
         try:
-            records.append(_encoder.encode(stamp(record, seq, clock)))
+            records.append(encode_record(stamp(record, seq, clock)))
         finally:
             records.close()
     except OSError as error:

@@ -39,6 +39,7 @@ from kasparctl.config import default_robot_id
 from kasparctl.game.jsonl import (
     UNDECODABLE,
     RecordsRead,
+    encode_record,
     line_seq,
     read_json_lines,
     read_records,
@@ -317,7 +318,7 @@ class Session:
         """
         stamped = stamp(record, self.last_seq + 1, clock)
         try:
-            self._log.append(_encoder.encode(stamped))
+            self._log.append(encode_record(stamped))
         except OSError as error:
             failed = f"cannot write record {stamped.seq}"
             raise storage_failed(self._log.path, failed, error) from error
@@ -366,7 +367,7 @@ class EventLog:
                 self.last_seq = max((line_seq(plain) for plain in read.records), default=0)
                 self._log = RecordLog(self.path)
             stamped = stamp(record, self.last_seq + 1, clock)
-            self._log.append(_encoder.encode(stamped))
+            self._log.append(encode_record(stamped))
         except OSError as error:
             failed = "cannot write the event log"
             raise storage_failed(self.path, failed, error, in_event_log=True) from error
