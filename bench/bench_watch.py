@@ -41,8 +41,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from view_records import question  # the records the view's tests write
 
+from kasparctl.game.jsonl import read_records
 from kasparctl.game.records import QuestionRecord, SessionEvent, SessionRecord, StepRecord
-from kasparctl.game.session import RECORDS_FILE, Session, read_records, session_dirs
+from kasparctl.game.session import RECORDS_FILE, Session, session_dirs
 
 CPU_TARGET = 1.0  # percent of one core, between records
 DELAY_TARGET_MS = 100.0  # p99, fsync to screen

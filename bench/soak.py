@@ -34,7 +34,8 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests"), str(ROOT / "bench")]
 
 from soak_faults import KINDS  # noqa: E402
 
-from kasparctl.game.session import RECORDS_FILE, read_json_lines  # noqa: E402
+from kasparctl.game.jsonl import read_json_lines  # noqa: E402
+from kasparctl.game.session import RECORDS_FILE  # noqa: E402
 
 WORKER = ROOT / "bench" / "soak_worker.py"
 MAX_CRASHES_PER_WORKER = 5

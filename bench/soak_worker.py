@@ -34,7 +34,10 @@ from soak_rig import (  # noqa: E402
 from hal.clock import LoopClock  # noqa: E402
 from hal.voice.speaker import Voice  # noqa: E402
 from kasparctl.config import UNCERTAINTY_MODES, Config  # noqa: E402
-from kasparctl.game.session import RECORDS_FILE, find_unfinished, read_json_lines, write_atomic  # noqa: E402
+from kasparctl.game.jsonl import read_json_lines  # noqa: E402
+from kasparctl.game.resume import find_unfinished  # noqa: E402
+from kasparctl.game.session import RECORDS_FILE  # noqa: E402
+from kasparctl.game.storage import write_atomic  # noqa: E402
 from kasparctl.log import configure_logging  # noqa: E402
 from kasparctl.sim import simtime  # noqa: E402
 from kasparctl.sim.demo import DemoOptions, assemble, demo_config, with_variant  # noqa: E402

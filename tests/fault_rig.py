@@ -37,7 +37,7 @@ from hal.keyfob.sim import COMMAND_GESTURES, SimKeyfob
 from hal.servos.sim import SimServos
 from hal.voice.sim import SimVoice
 from kasparctl.config import load_config
-from kasparctl.game import session as session_module
+from kasparctl.game import storage as storage_module
 from kasparctl.game.events import GameEvent
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.session import EVENTS_FILE, RECORDS_FILE
@@ -142,14 +142,14 @@ class Children:
 
 class Breakage:
     """The faults that are not hardware: a phrase that raises once (a bug), a disk that
-    refuses every write (the one place session files are written: session._write_all)."""
+    refuses every write (the one place session files are written: storage._write_all)."""
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
         self.bug_armed = False
         self.bugs = 0
         self.disk_errno: int | None = None
         original_line = PhrasePicker.line
-        original_write = session_module._write_all
+        original_write = storage_module._write_all
         breakage = self
 
         def line(picker: PhrasePicker, key: str, **values: str) -> str:
@@ -165,7 +165,7 @@ class Breakage:
             original_write(fd, data)
 
         monkeypatch.setattr(PhrasePicker, "line", line)
-        monkeypatch.setattr(session_module, "_write_all", write_all)
+        monkeypatch.setattr(storage_module, "_write_all", write_all)
 
     def disk(self, error: int | None = errno.ENOSPC) -> None:
         self.disk_errno = error

@@ -158,7 +158,7 @@ def _play_study(root: Path) -> Study:
 
 
 def raw_records(session_dir: Path) -> list[dict[str, Any]]:
-    """Records read the plain way, independently of kasparctl.game.session.read_records."""
+    """Records read the plain way, independently of kasparctl.game.jsonl.read_records."""
     records = []
     for line in (session_dir / RECORDS_FILE).read_text(errors="replace").splitlines():
         try:

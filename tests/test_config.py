@@ -9,7 +9,8 @@ import msgspec
 import pytest
 
 from kasparctl.cli import main
-from kasparctl.config import Config, ConfigError, Name, _Limits, load_config, parse_config
+from kasparctl.config import Config, ConfigError, Name, load_config, parse_config
+from kasparctl.config.explain import _Limits
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "systemd" / "kaspar.toml"

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from kasparctl.game.jsonl import read_records
 from kasparctl.game.records import (
     PoseRecord,
     SessionEvent,
@@ -19,7 +20,7 @@ from kasparctl.game.records import (
     StepRecord,
     TrialRecord,
 )
-from kasparctl.game.session import RECORDS_FILE, read_records
+from kasparctl.game.session import RECORDS_FILE
 
 KILLS_WANTED = 22
 POLL_S = 0.001  # how often the records are counted while waiting for the next one

@@ -29,16 +29,11 @@ from hal.voice.settings import VoiceSettings
 from hal.voice.sim import SimVoice
 from hal.voice.speaker import Voice
 from kasparctl.cli import main
-from kasparctl.game import session as session_module
+from kasparctl.game import storage as storage_module
+from kasparctl.game.jsonl import read_records
 from kasparctl.game.records import FaultRecord, FaultSource, HalEvent, HalRecord
-from kasparctl.game.session import (
-    EVENTS_FILE,
-    EventLog,
-    RecordLog,
-    Session,
-    StorageFailed,
-    read_records,
-)
+from kasparctl.game.session import EVENTS_FILE, EventLog, Session
+from kasparctl.game.storage import RecordLog, StorageFailed
 from kasparctl.log import JournalPriority, configure_logging, connected_to_journal
 from kasparctl.service.status import STATUS_WORDS, status_line
 
@@ -210,16 +205,16 @@ def test_a_record_the_disk_refuses_is_never_left_half_written(
 ) -> None:
     log = RecordLog(tmp_path / "records.jsonl")
     log.append(b'{"seq": 1}')
-    original = session_module._write_all
+    original = storage_module._write_all
 
     def half_then_full(fd: int, data: bytes) -> None:
         os.write(fd, data[: len(data) // 2])
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(session_module, "_write_all", half_then_full)
+    monkeypatch.setattr(storage_module, "_write_all", half_then_full)
     with pytest.raises(OSError):
         log.append(b'{"seq": 2, "a long record": "' + b"x" * 100 + b'"}')
-    monkeypatch.setattr(session_module, "_write_all", original)
+    monkeypatch.setattr(storage_module, "_write_all", original)
     log.append(b'{"seq": 2}')
     log.close()
     assert (tmp_path / "records.jsonl").read_bytes() == b'{"seq": 1}\n{"seq": 2}\n'
@@ -231,7 +226,7 @@ def test_a_session_the_disk_refuses_is_named_and_leaves_nothing_behind(
     def full(fd: int, data: bytes) -> None:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(session_module, "_write_all", full)
+    monkeypatch.setattr(storage_module, "_write_all", full)
     with pytest.raises(StorageFailed, match="cannot create the session: No space left on device"):
         Session.create(tmp_path, {"group": "A"})
     assert list((tmp_path / "sessions").iterdir()) == []

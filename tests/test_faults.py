@@ -409,7 +409,8 @@ def test_a_session_whose_start_cannot_be_written_is_not_left_half_open(
     """The disk fills between the session's directory and its first record: no session is
     left without its start; once the disk takes records, long green opens a whole one."""
     from kasparctl.game.records import SessionRecord
-    from kasparctl.game.session import Session, StorageFailed
+    from kasparctl.game.session import Session
+    from kasparctl.game.storage import StorageFailed
 
     original = Session.record
     refused: list[str] = []

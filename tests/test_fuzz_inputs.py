@@ -20,8 +20,9 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from kasparctl.config import Config, ConfigError, parse_config
+from kasparctl.game.jsonl import TORN_SUFFIX, read_json_lines
 from kasparctl.game.phrases import PhraseBook, PhraseError, parse_phrasebook
-from kasparctl.game.session import TORN_SUFFIX, read_json_lines, state_from_plain, state_to_plain
+from kasparctl.game.session import state_from_plain, state_to_plain
 from kasparctl.game.state import GameState, StateError
 
 REPO = Path(__file__).resolve().parents[1]

@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from kasparctl.config import GameSettings, SessionPlan
+from kasparctl.game.jsonl import read_records
 from kasparctl.game.phrases import load_phrasebook
 from kasparctl.game.records import StepRecord, TrialRecord
 from kasparctl.game.scripts import SCRIPTS
-from kasparctl.game.session import RECORDS_FILE, read_records, state_to_plain
+from kasparctl.game.session import RECORDS_FILE, state_to_plain
 from kasparctl.game.state import GameState
 from kasparctl.game.trial import Answer, TrialPlan, plan_trial, score_answer
 from kasparctl.learning.learner import LearnerParams, choose, softmax

@@ -30,7 +30,7 @@ def test_wheel_ships_the_phrases_and_every_package(tmp_path: Path) -> None:
     (wheel,) = tmp_path.glob("kasparctl-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
     assert "phrases/en.toml" in names
-    assert {"kasparctl/learning/learner.py", "kasparctl/config.py", "hal/__init__.py"} <= names
+    assert {"kasparctl/learning/learner.py", "kasparctl/config/__init__.py", "kasparctl/config/schema.py", "hal/__init__.py"} <= names
     assert not any(name.startswith("tests/") for name in names)
     entry_points = next(n for n in names if n.endswith("entry_points.txt"))
     assert "kasparctl = kasparctl.cli:main" in zipfile.ZipFile(wheel).read(entry_points).decode()

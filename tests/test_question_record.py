@@ -6,8 +6,9 @@ from __future__ import annotations
 import io
 from pathlib import Path
 
+from kasparctl.game.jsonl import read_records
 from kasparctl.game.records import QuestionRecord, TrialRecord
-from kasparctl.game.session import read_records, session_dirs
+from kasparctl.game.session import session_dirs
 from kasparctl.sim.demo import DemoOptions, demo_config, run_demo
 from kasparctl.sim.teacher import Teacher
 

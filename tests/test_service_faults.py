@@ -37,7 +37,8 @@ from service_fixtures import (
     spoken,
 )
 
-from kasparctl.game.session import EVENTS_FILE, read_records
+from kasparctl.game.jsonl import read_records
+from kasparctl.game.session import EVENTS_FILE
 from kasparctl.service.reload import Outcome, request_reload
 
 IDLE = "waiting: 'next' starts the session"

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from kasparctl.config import GameSettings
+from kasparctl.game.jsonl import read_json_lines, read_records
 from kasparctl.game.records import (
     CommandRecord,
     FaultRecord,
@@ -17,18 +18,10 @@ from kasparctl.game.records import (
     StepRecord,
     UndoRecord,
 )
-from kasparctl.game.session import (
-    RECORDS_FILE,
-    STATE_FILE,
-    Session,
-    SessionError,
-    find_unfinished,
-    read_json_lines,
-    read_records,
-    state_to_plain,
-    write_atomic,
-)
+from kasparctl.game.resume import find_unfinished
+from kasparctl.game.session import RECORDS_FILE, STATE_FILE, Session, state_to_plain
 from kasparctl.game.state import GameState, StateError
+from kasparctl.game.storage import SessionError, write_atomic
 from kasparctl.learning.learner import LearnerParams
 from kasparctl.vocabulary import Command
 

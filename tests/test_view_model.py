@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 from view_records import PLAN, TOYS, Stamper, question, trial
 
+from kasparctl.game.jsonl import read_records
 from kasparctl.game.records import (
     CommandRecord,
     Confirmation,
@@ -24,7 +25,7 @@ from kasparctl.game.records import (
     StepRecord,
     UndoRecord,
 )
-from kasparctl.game.session import RECORDS_FILE, read_records
+from kasparctl.game.session import RECORDS_FILE
 from kasparctl.research.catalogue import load_session
 from kasparctl.view.fold import daemon_events, session_view
 from kasparctl.vocabulary import Command

@@ -17,8 +17,9 @@ from pathlib import Path
 import pytest
 from tmux_pane import Tmux
 
+from kasparctl.game.jsonl import read_records
 from kasparctl.game.records import AnyRecord, QuestionRecord, SessionEvent, SessionRecord
-from kasparctl.game.session import RECORDS_FILE, read_records, session_dirs
+from kasparctl.game.session import RECORDS_FILE, session_dirs
 
 pytestmark = [
     pytest.mark.slow,

@@ -31,7 +31,7 @@ from kasparctl.config import UNCERTAINTY_MODES, Config, ConfigError, load_config
 from kasparctl.game.language import with_language
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.phrases import PhraseError
-from kasparctl.game.session import SessionError
+from kasparctl.game.storage import SessionError
 from kasparctl.learning.learner import LearnerError
 from kasparctl.log import configure_logging
 from kasparctl.sim.demo import (

@@ -70,6 +70,7 @@ from kasparctl.game.bodywork import (
     point_style,
 )
 from kasparctl.game.events import GameEvent, Listener
+from kasparctl.game.jsonl import record_to_plain
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.presses import ChildPresses, Press
 from kasparctl.game.records import (
@@ -102,13 +103,7 @@ from kasparctl.game.researcher import (
     gesture_needs,
 )
 from kasparctl.game.scripts import LEGACY_SCRIPT, Script, script
-from kasparctl.game.session import (
-    EventLog,
-    Session,
-    StorageFailed,
-    frozen_learner,
-    record_to_plain,
-)
+from kasparctl.game.session import EventLog, Session, frozen_learner
 from kasparctl.game.speech import Speech, VoiceFailed
 from kasparctl.game.stages import (
     ENDS,
@@ -120,6 +115,7 @@ from kasparctl.game.stages import (
     bound_transitions,
 )
 from kasparctl.game.state import GameState, far_from
+from kasparctl.game.storage import StorageFailed
 from kasparctl.game.trial import Answer, TrialPlan, plan_trial, question_record, score_answer
 from kasparctl.log import bind_context
 from kasparctl.vocabulary import Command

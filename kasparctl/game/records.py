@@ -1,7 +1,7 @@
 """What a session records: one typed struct per kind of record, a tagged union on "kind".
 
 Each line of records.jsonl is one of these, as a JSON object whose "kind"
-names its struct. kasparctl.game.session is the one place that encodes and
+names its struct. kasparctl.game.jsonl is the one place that encodes and
 decodes them; everything else (the game, GameState.apply, the research
 exports, the statistics, the simulations) reads their typed fields.
 

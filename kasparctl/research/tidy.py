@@ -19,8 +19,8 @@ import re
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any, TextIO
 
+from kasparctl.game.jsonl import record_to_plain
 from kasparctl.game.records import ConfusedRecord, ReopenRecord, TrialRecord
-from kasparctl.game.session import record_to_plain
 from kasparctl.research.anonymise import NO_PSEUDONYMS, Pseudonyms
 from kasparctl.research.catalogue import SessionData
 from kasparctl.research.output import text_output

@@ -50,30 +50,31 @@ from kasparctl.body.behaviours import BehaviourError
 from kasparctl.body.build import make_body
 from kasparctl.config import Config, ConfigError, SessionPlan, load_config, servo_backend_given
 from kasparctl.game.events import GameEvent, Listener
+from kasparctl.game.jsonl import UNDECODABLE, read_records
 from kasparctl.game.language import phrasebook_for
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.machine import Game, HardwareFault, planned
 from kasparctl.game.phrases import PhraseBook, PhrasePicker
 from kasparctl.game.records import FaultSource, Record, SessionEvent, SessionRecord, StepRecord
+from kasparctl.game.resume import (
+    Abandoned,
+    CannotResume,
+    Resumable,
+    abandoned_reason,
+    reopen,
+    resume_or_abandon,
+)
 from kasparctl.game.session import (
     PLAN_FILE,
     RECORDS_FILE,
-    UNDECODABLE,
-    Abandoned,
-    CannotResume,
     EventLog,
-    Resumable,
     Session,
-    StorageFailed,
-    abandoned_reason,
     is_finished,
-    read_records,
-    reopen,
-    resume_or_abandon,
     session_dirs,
 )
 from kasparctl.game.stages import ENDS
 from kasparctl.game.state import GameState
+from kasparctl.game.storage import StorageFailed
 from kasparctl.log import configure_logging
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
 from kasparctl.service.sdnotify import Notifier, watchdog_interval

@@ -49,12 +49,8 @@ from kasparctl.game.records import (
     PoseRecord,
     TrialRecord,
 )
-from kasparctl.game.session import (
-    Abandoned,
-    EventLog,
-    Session,
-    resume_or_abandon,
-)
+from kasparctl.game.resume import Abandoned, resume_or_abandon
+from kasparctl.game.session import EventLog, Session
 from kasparctl.game.stages import ENDS
 from kasparctl.game.state import GameState
 from kasparctl.sim import simtime

@@ -14,8 +14,9 @@ from pathlib import Path
 import msgspec
 
 from kasparctl.config import Config
+from kasparctl.game.jsonl import read_records
 from kasparctl.game.records import SessionRecord, TrialRecord, UndoRecord
-from kasparctl.game.session import RECORDS_FILE, read_records
+from kasparctl.game.session import RECORDS_FILE
 from kasparctl.learning.session_stats import problems_from_trials
 from kasparctl.learning.study_stats import ProblemRecord, StudyStats, summarise
 from kasparctl.sim.demo import DemoOptions, run_demo

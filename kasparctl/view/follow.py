@@ -24,13 +24,9 @@ from typing import Any
 
 import msgspec
 
+from kasparctl.game.jsonl import read_json_lines, read_records
 from kasparctl.game.lock import lock_holder
-from kasparctl.game.session import (
-    PLAN_FILE,
-    RECORDS_FILE,
-    read_json_lines,
-    read_records,
-)
+from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
 from kasparctl.view.fold import SessionFold, daemon_events
 from kasparctl.view.inotify import (
     IN_CREATE,

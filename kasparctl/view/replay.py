@@ -19,8 +19,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from kasparctl.game.jsonl import read_records
 from kasparctl.game.records import AnyRecord
-from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, read_records
+from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
 from kasparctl.view.ages import parse_time
 from kasparctl.view.fold import SessionFold
 from kasparctl.view.follow import read_plan
