@@ -244,10 +244,7 @@ class Game:
         initial = "idle"
         if start.resumed is not None:
             self._take_session(start.resumed)
-            step = start.resumed.state.step
-            initial = step if step in STATES else "idle"
-            if start.resumed.state.paused and initial in PAUSABLE:
-                initial = "paused"
+            initial = _resumed_stage(start.resumed.state)
         self.recorder.attach(self._storage_refused)
         self.problems.follow(lambda problems: self._emit(GameEvent.PROBLEMS, problems=problems))
         self.machine = AsyncMachine(
@@ -461,6 +458,10 @@ class Game:
         await self._fire(key)
         if opens_session:
             self._write(applied)
+        await self._confirm_after(key)
+
+    async def _confirm_after(self, key: Confirmation) -> None:
+        """Kaspar confirms what a command stopped, once it has; a stop on the way to rest."""
         if key is Confirmation.STOP:
             await self._stop_safely()
         elif key not in SPOKEN_FIRST and key not in SILENT:
@@ -843,6 +844,12 @@ class Game:
         if self.plan is None:
             raise RuntimeError("no session is open")
         return self.plan
+
+
+def _resumed_stage(state: GameState) -> str:
+    """The stage a resumed session begins in: its step (paused, if it was), or idle."""
+    initial = state.step if state.step in STATES else "idle"
+    return "paused" if state.paused and initial in PAUSABLE else initial
 
 
 def _resume_step(state: GameState | None) -> str:

@@ -300,7 +300,26 @@ class Daemon:
         await self.body.start()
 
     async def _one_session(self) -> None:
-        assert self.hw is not None
+        resumed, stopped = self._read_sessions()
+        faults, self._pending_faults = self._pending_faults, []
+        game = self._new_game(resumed, stopped, faults)
+        await self._play(game)
+        # What the disk still refuses is written by the next game (or before the next read).
+        self.lasting.recorder.flush()
+        self.lasting.problems.game_ended()
+        if game.session is not None:
+            game.session.close()
+        if game.stopped_waiting is not None:
+            game.stopped_waiting.session.close()  # neither reopened nor closed in this game
+        if self._reload:
+            self._apply_reload()
+
+    def _read_sessions(self) -> tuple[OpenedSession | None, OpenedSession | None]:
+        """The session to resume, or else the stopped one waiting for the researcher.
+
+        What keeps them from being read (the directory not locked, the disk, a bug) is a
+        fault for the next game to begin with.
+        """
         resumed = stopped = None
         self._resumable = None
         self._read_again = False
@@ -324,8 +343,16 @@ class Daemon:
         self._read_again = unread or any(
             fault.kind is FaultSource.STORAGE for fault in self._pending_faults
         )
-        faults, self._pending_faults = self._pending_faults, []
-        assert self._book is not None  # read in _run
+        return resumed, stopped
+
+    def _new_game(
+        self,
+        resumed: OpenedSession | None,
+        stopped: OpenedSession | None,
+        faults: Sequence[HardwareFault],
+    ) -> Game:
+        """The next game, followed by the daemon's status and listeners."""
+        assert self.hw is not None and self._book is not None  # opened and read in _run
         picker = PhrasePicker(self._book, np.random.default_rng())
         game = Game(
             Setup(self._config_of(resumed or stopped), self.hw, picker, self.body),
@@ -339,6 +366,10 @@ class Daemon:
         if self._say_abandoned:
             self._say_abandoned = False
             game.speech.announce_soon("session.abandoned")
+        return game
+
+    async def _play(self, game: Game) -> None:
+        """Play `game` until it ends, or the service stops (its session left to resume)."""
         playing = asyncio.create_task(game.run(), name="game")
         self._playing = playing
         stopping = asyncio.create_task(self._stopping.wait())
@@ -359,15 +390,6 @@ class Daemon:
             await asyncio.gather(self._ending, return_exceptions=True)
             self._ending = None
         self._playing = None
-        # What the disk still refuses is written by the next game (or before the next read).
-        self.lasting.recorder.flush()
-        self.lasting.problems.game_ended()
-        if game.session is not None:
-            game.session.close()
-        if game.stopped_waiting is not None:
-            game.stopped_waiting[0].close()  # neither reopened nor closed in this game
-        if self._reload:
-            self._apply_reload()
 
     def _status(self, game: Game) -> str:
         """STATUS=: the stage, Kaspar confused (and what reopen would do), the problems."""
