@@ -407,13 +407,13 @@ def test_a_step_that_swallows_its_cancellation_is_cancelled_again(
 ) -> None:
     # The game waits for a cancelled step to end before it enters the next state; a
     # step that carried on (a library dropping the cancellation) used to hang it there.
-    from kasparctl.game.machine import Game
+    from kasparctl.game.steps import Steps
 
     deaf: list[bool] = []
     swallowed: list[bool] = []
-    teach_one_bag = Game._teach_one_bag
+    teach_one_bag = Steps._teach_one_bag
 
-    async def deaf_once(self: Game, bag: int, teach_round: int, group: str) -> None:
+    async def deaf_once(self: Steps, bag: int, teach_round: int, group: str) -> None:
         if not deaf:
             deaf.append(True)
             try:
@@ -421,10 +421,10 @@ def test_a_step_that_swallows_its_cancellation_is_cancelled_again(
             except asyncio.CancelledError:
                 swallowed.append(True)  # and carries on, as if the cancel never came:
                 # a press that only the blocked run loop gives
-                await self.presses.open(asyncio.get_running_loop().time())
+                await self.ctx.presses.open(asyncio.get_running_loop().time())
         await teach_one_bag(self, bag, teach_round, group)
 
-    monkeypatch.setattr(Game, "_teach_one_bag", deaf_once)
+    monkeypatch.setattr(Steps, "_teach_one_bag", deaf_once)
 
     async def scenario(rig: DemoRig) -> None:
         while not deaf:

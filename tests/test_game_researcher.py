@@ -11,7 +11,7 @@ import pytest
 from hal import Hardware
 from hal.keyfob.gestures import Gesture, GestureKind
 from kasparctl.config import GameSettings
-from kasparctl.game.machine import Game
+from kasparctl.game.machine import Game, Lasting, Setup
 from kasparctl.game.phrases import PhrasePicker, load_phrasebook
 from kasparctl.game.records import Confirmation
 from kasparctl.game.researcher import (
@@ -148,7 +148,7 @@ def _game(settings: GameSettings) -> Game:
     config = msgspec.structs.replace(demo_config(), game=settings)
     picker = PhrasePicker(load_phrasebook("en"), np.random.default_rng(0))
     hardware = Hardware(servos=None, keyfob=None, voice=None)  # type: ignore[arg-type]
-    return Game(config, hardware, picker, open_session=lambda: None)  # type: ignore[arg-type,return-value]
+    return Game(Setup(config, hardware, picker), Lasting.new(None, lambda: None))  # type: ignore[arg-type,return-value]
 
 
 @pytest.mark.parametrize("variant", ["names", "pilot"])

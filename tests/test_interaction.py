@@ -128,14 +128,14 @@ def test_the_researchers_device_away_gives_them_the_keyfobs_holds_and_back_takes
         await on_event(rig, "waiting_for_researcher", lambda info: info["step"] == "placing")
         await rig.researcher.perform("lost")
         await asyncio.sleep(3)
-        assert rig.game.commands_on_keyfob()
+        assert rig.game.router.commands_on_keyfob()
         await rig.keyfob.perform("hold green 1.5")  # a child's hold: a press, nothing more
         paused = on_event(rig, "state", lambda info: info["state"] == "paused")
         await rig.keyfob.perform("hold red 3.3")  # the researcher's pause on the keyfob
         await paused
         await rig.researcher.perform("back")
         await asyncio.sleep(3)
-        assert not rig.game.commands_on_keyfob()
+        assert not rig.game.router.commands_on_keyfob()
         await rig.keyfob.perform("hold red 3.3")  # now only a press: nothing happens
         await asyncio.sleep(2)
         await rig.command("stop")

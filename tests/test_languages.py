@@ -474,7 +474,7 @@ def test_old_sessions_read_as_english(tmp_path: Path) -> None:
 
 def test_a_plan_records_its_language() -> None:
     from kasparctl.config import SessionPlan
-    from kasparctl.game.machine import planned
+    from kasparctl.game.opening import planned
 
     config = with_language(demo_config(), "it")
     assert planned(config, SessionPlan(group="g"), 1)["language"] == "it"

@@ -50,12 +50,14 @@ from kasparctl.body.behaviours import BehaviourError
 from kasparctl.body.build import make_body
 from kasparctl.config import Config, ConfigError, SessionPlan, load_config, servo_backend_given
 from kasparctl.game.events import GameEvent, Listener
+from kasparctl.game.faults import HardwareFault
 from kasparctl.game.jsonl import UNDECODABLE, read_records
 from kasparctl.game.language import phrasebook_for
 from kasparctl.game.lock import StateDirBusy, StateDirLock
-from kasparctl.game.machine import Game, HardwareFault, planned
+from kasparctl.game.machine import Game, Lasting, Setup, Start
+from kasparctl.game.opening import OpenedSession, open_new
 from kasparctl.game.phrases import PhraseBook, PhrasePicker
-from kasparctl.game.records import FaultSource, Record, SessionEvent, SessionRecord, StepRecord
+from kasparctl.game.records import FaultSource, SessionEvent, SessionRecord, StepRecord
 from kasparctl.game.resume import (
     Abandoned,
     CannotResume,
@@ -64,16 +66,8 @@ from kasparctl.game.resume import (
     reopen,
     resume_or_abandon,
 )
-from kasparctl.game.session import (
-    PLAN_FILE,
-    RECORDS_FILE,
-    EventLog,
-    Session,
-    is_finished,
-    session_dirs,
-)
+from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, EventLog, is_finished, session_dirs
 from kasparctl.game.stages import ENDS
-from kasparctl.game.state import GameState
 from kasparctl.game.storage import StorageFailed
 from kasparctl.log import configure_logging
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
@@ -88,8 +82,6 @@ LOOP_LAG_LIMIT_S = 1.0
 REST_TIMEOUT_S = 15.0
 # How long a game being ended may take to end before it is cancelled again.
 GAME_CANCEL_GRACE_S = 1.0
-# Records the disk refused, each with where it goes and its clock: carried from game to game.
-Unwritten = list[tuple[Session | EventLog, Record, float]]
 DEBUG_BLOCK_ENV = "KASPAR_DEBUG_LOOP_BLOCK_S"
 # The game events after which STATUS= is written again: the stage, the problems, a new
 # session, and Kaspar confused until a name is re-opened or the target learned.
@@ -142,6 +134,8 @@ class Daemon:
         self.game: Game | None = None
         self.listeners = list(listeners)
         self.events = EventLog(self._state_dir)
+        # What outlives each game: the records the disk refused, and what is not working.
+        self.lasting = Lasting.new(self.events, self._open_session)
         self.lock = StateDirLock(self._state_dir)
         self._stopping = asyncio.Event()
         self._stop_reason = ""
@@ -153,11 +147,9 @@ class Daemon:
         self._pending_faults: list[HardwareFault] = []
         self._read_again = False
         self._playing: asyncio.Task[str] | None = None
-        self._carried_problems: dict[FaultSource, str] = {}
         self._book: PhraseBook | None = None
         self._ending: asyncio.Task[None] | None = None
         self._resumable: Resumable | None = None
-        self._unwritten: Unwritten = []
         # A session abandoned at the last read: shown in STATUS= until the next one opens.
         self._notice: str | None = None
         self._say_abandoned = False
@@ -303,13 +295,32 @@ class Daemon:
         await self.body.start()
 
     async def _one_session(self) -> None:
-        assert self.hw is not None
+        resumed, stopped = self._read_sessions()
+        faults, self._pending_faults = self._pending_faults, []
+        game = self._new_game(resumed, stopped, faults)
+        await self._play(game)
+        # What the disk still refuses is written by the next game (or before the next read).
+        self.lasting.recorder.flush()
+        self.lasting.problems.game_ended()
+        if game.session is not None:
+            game.session.close()
+        if game.stopped_waiting is not None:
+            game.stopped_waiting.session.close()  # neither reopened nor closed in this game
+        if self._reload:
+            self._apply_reload()
+
+    def _read_sessions(self) -> tuple[OpenedSession | None, OpenedSession | None]:
+        """The session to resume, or else the stopped one waiting for the researcher.
+
+        What keeps them from being read (the directory not locked, the disk, a bug) is a
+        fault for the next game to begin with.
+        """
         resumed = stopped = None
         self._resumable = None
         self._read_again = False
         unread = True
         if self._take_lock():
-            self._write_carried()
+            self.lasting.recorder.flush()  # what an earlier game kept, before the sessions are read
             try:
                 resumed = self._resume()
                 stopped = None if resumed is not None else self._stopped_waiting()
@@ -327,21 +338,21 @@ class Daemon:
         self._read_again = unread or any(
             fault.kind is FaultSource.STORAGE for fault in self._pending_faults
         )
-        faults, self._pending_faults = self._pending_faults, []
-        assert self._book is not None  # read in _run
+        return resumed, stopped
+
+    def _new_game(
+        self,
+        resumed: OpenedSession | None,
+        stopped: OpenedSession | None,
+        faults: Sequence[HardwareFault],
+    ) -> Game:
+        """The next game, followed by the daemon's status and listeners."""
+        assert self.hw is not None and self._book is not None  # opened and read in _run
         picker = PhrasePicker(self._book, np.random.default_rng())
         game = Game(
-            self._config_of(resumed or stopped),
-            self.hw,
-            picker,
-            self._open_session,
-            resumed,
-            stopped=stopped,
-            event_log=self.events,
-            body=self.body,
-            startup_faults=faults,
-            known_problems=self._carried_problems,
-            unwritten=self._unwritten,
+            Setup(self._config_of(resumed or stopped), self.hw, picker, self.body),
+            self.lasting,
+            Start(resumed, stopped, faults),
         )
         game.listeners.append(self._on_game_event)
         game.listeners.extend(self.listeners)
@@ -350,6 +361,10 @@ class Daemon:
         if self._say_abandoned:
             self._say_abandoned = False
             game.speech.announce_soon("session.abandoned")
+        return game
+
+    async def _play(self, game: Game) -> None:
+        """Play `game` until it ends, or the service stops (its session left to resume)."""
         playing = asyncio.create_task(game.run(), name="game")
         self._playing = playing
         stopping = asyncio.create_task(self._stopping.wait())
@@ -370,42 +385,6 @@ class Daemon:
             await asyncio.gather(self._ending, return_exceptions=True)
             self._ending = None
         self._playing = None
-        game.flush_unwritten()
-        # What the disk still refuses is written by the next game (or before the next read).
-        self._unwritten = game.unwritten
-        # Not over with the game: the keyfob or the researcher's device still away (their
-        # reports were this game's), the voice or the disk until a line is heard or a
-        # record written.
-        carried = (
-            FaultSource.KEYFOB,
-            FaultSource.RESEARCHER,
-            FaultSource.VOICE,
-            FaultSource.STORAGE,
-        )
-        self._carried_problems = {
-            kind: detail for kind, detail in game.problems.items() if kind in carried
-        }
-        if game.session is not None:
-            game.session.close()
-        if game.stopped_waiting is not None:
-            game.stopped_waiting[0].close()  # neither reopened nor closed in this game
-        if self._reload:
-            self._apply_reload()
-
-    def _write_carried(self) -> None:
-        """Write the records an earlier game kept, in order, as far as the disk takes them."""
-        while self._unwritten:
-            target, record, at = self._unwritten[0]
-            try:
-                target.record(record, at)
-            except StorageFailed as error:
-                log.error(
-                    "records still not written; the journal holds them",
-                    count=len(self._unwritten),
-                    error=str(error),
-                )
-                return
-            self._unwritten.pop(0)
 
     def _status(self, game: Game) -> str:
         """STATUS=: the stage, Kaspar confused (and what reopen would do), the problems."""
@@ -441,12 +420,12 @@ class Daemon:
 
     # -- sessions --------------------------------------------------------------------
 
-    def _config_of(self, resumed: tuple[Session, SessionPlan, GameState] | None) -> Config:
+    def _config_of(self, resumed: OpenedSession | None) -> Config:
         """The configuration a game plays: a resumed (or reopened) session keeps the learner
         it began with."""
         return self._resumable.config(self.config) if resumed and self._resumable else self.config
 
-    def _resume(self) -> tuple[Session, SessionPlan, GameState] | None:
+    def _resume(self) -> OpenedSession | None:
         """The unfinished session to carry on; each that cannot be is abandoned on the way.
 
         StorageFailed when the sessions cannot be read or an abandon cannot be written.
@@ -459,13 +438,8 @@ class Daemon:
         if resumable is None:
             return None
         session, state = resumable.session, resumable.state
-        # Records kept for this very session by an earlier game go on from its seq on disk.
-        self._unwritten = [
-            (session if isinstance(t, Session) and t.directory == session.directory else t, r, c)
-            for t, r, c in self._unwritten
-        ]
         log.info("resuming session", session=session.id, step=state.step, trials=state.trials)
-        return session, resumable.plan, state
+        return OpenedSession(session, resumable.plan, state)
 
     def _note_abandoned(self, abandoned: Abandoned, clock: float) -> None:
         """Shown in STATUS=, said when the game begins, and in the event log."""
@@ -479,17 +453,16 @@ class Daemon:
         )
         self.events.record(record, clock)  # StorageFailed: a storage fault, as any
 
-    def _open_session(self) -> tuple[Session, SessionPlan, GameState]:
+    def _open_session(self) -> OpenedSession:
         plan = self._next_plan()
         seed = (
             self.config.game.seed if self.config.game.seed is not None else secrets.randbelow(2**31)
         )
-        session = Session.create(
-            self.state_dir, planned(self.config, plan, seed), robot=self.config.robot()
+        opened = open_new(self.state_dir, self.config, plan, seed)
+        log.info(
+            "session opened", session=opened.session.id, group=plan.group, condition=plan.condition
         )
-        state = GameState.new(self.config.game, self.config.profile(plan.profile), seed)
-        log.info("session opened", session=session.id, group=plan.group, condition=plan.condition)
-        return session, plan, state
+        return opened
 
     def _next_plan(self) -> SessionPlan:
         """The first planned session (group and number) not yet ended; then the last again.
@@ -510,7 +483,7 @@ class Daemon:
                     done.add((meta["group"], int(meta.get("number", 1))))
         return next((p for p in plans if (p.group, p.number) not in done), plans[-1])
 
-    def _stopped_waiting(self) -> tuple[Session, SessionPlan, GameState] | None:
+    def _stopped_waiting(self) -> OpenedSession | None:
         """The latest session, if the researcher stopped it and has not closed it yet.
 
         StorageFailed when it cannot be read; a stopped session that cannot be reopened
@@ -540,7 +513,7 @@ class Daemon:
             return None
         self._resumable = resumable
         log.info("a stopped session waits: next reopens it, stop closes it", session=latest.name)
-        return resumable.session, resumable.plan, resumable.state
+        return OpenedSession(resumable.session, resumable.plan, resumable.state)
 
     # -- signals, reload, watchdog ------------------------------------------------------
 

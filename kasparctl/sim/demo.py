@@ -40,7 +40,8 @@ from kasparctl.body.build import make_body
 from kasparctl.config import Config, SessionPlan, UncertaintyMode, parse_config
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.language import phrasebook_for
-from kasparctl.game.machine import Game, planned
+from kasparctl.game.machine import Game, Lasting, Setup, Start
+from kasparctl.game.opening import OpenedSession, open_new
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.records import (
     AnyRecord,
@@ -50,9 +51,8 @@ from kasparctl.game.records import (
     TrialRecord,
 )
 from kasparctl.game.resume import Abandoned, resume_or_abandon
-from kasparctl.game.session import EventLog, Session
+from kasparctl.game.session import EventLog
 from kasparctl.game.stages import ENDS
-from kasparctl.game.state import GameState
 from kasparctl.sim import simtime
 from kasparctl.sim.children import MAX_RESUMES, ChildPress, Hands, SimulatedGroup
 from kasparctl.sim.simulate import draw_answer_key
@@ -246,9 +246,10 @@ class DemoRig(Generic[ServosT]):
             await self.body.close()
             await self.voice.close()
             await self.servos.close()
-            self.game.flush_unwritten()
-            if self.game.event_log is not None:
-                self.game.event_log.close()
+            recorder = self.game.recorder
+            recorder.flush()
+            if recorder.event_log is not None:
+                recorder.event_log.close()
             if self.game.session is not None:
                 self.game.session.close()
         if reader_gone.is_set():
@@ -264,8 +265,8 @@ class DemoRig(Generic[ServosT]):
             )
         session.close()
         records = session.records()
-        if self.game.event_log is not None:
-            records += self.game.event_log.records().records
+        if self.game.recorder.event_log is not None:
+            records += self.game.recorder.event_log.records().records
         trials = [r for r in records if isinstance(r, TrialRecord)]
         presses = self.children.presses if self.children is not None else []
         return DemoResult(
@@ -345,20 +346,17 @@ def assemble(
         narrate(f"session {abandoned.session_id} abandoned, it cannot be resumed: {why}")
     resumed = None
     if outcome.resumable is not None:
-        resumed = outcome.resumable.session, outcome.resumable.plan, outcome.resumable.state
-        plan = resumed[1]
+        resumable = outcome.resumable
+        resumed = OpenedSession(resumable.session, resumable.plan, resumable.state)
+        plan = resumed.plan
         config = outcome.resumable.config(config)
     answers = _answers(config, plan, options.seed)
 
-    def open_session() -> tuple[Session, SessionPlan, GameState]:
+    def open_session() -> OpenedSession:
         with_key = msgspec.structs.replace(
             plan, answer_key=tuple(config.game.toys[a] for a in answers)
         )
-        session = Session.create(
-            options.state_dir, planned(config, with_key, options.seed), robot=config.robot()
-        )
-        state = GameState.new(config.game, config.profile(with_key.profile), options.seed)
-        return session, with_key, state
+        return open_new(options.state_dir, config, with_key, options.seed)
 
     hardware = Hardware(servos, keyfob, voice, researcher)
     # Before the session opens and after it ends, what happens goes where the service puts it.
@@ -366,11 +364,13 @@ def assemble(
     if body is None:
         # Seeded like everything else in the demo: blinks at the same moments, the same game.
         body = make_body(config, servos, voice, rng=random.Random(options.seed))
-    game = Game(config, hardware, picker, open_session, resumed, event_log=events, body=body)
+    game = Game(
+        Setup(config, hardware, picker, body), Lasting.new(events, open_session), Start(resumed)
+    )
     children = None
     if not options.interactive:
         # A resumed game gets fresh but reproducible children: seeded by where it resumed.
-        progress = 0 if resumed is None else resumed[2].trials + 1
+        progress = 0 if resumed is None else resumed.state.trials + 1
         children = SimulatedGroup(
             keyfob,
             servos,
