@@ -20,6 +20,7 @@ from typing import Annotated, Any, Literal
 
 import msgspec
 
+from hal.errors import KasparError
 from hal.keyfob.settings import KeyfobSettings, ResearcherSettings
 from hal.servos.settings import ServoSettings
 from hal.voice.settings import VoiceSettings, voice_for_language
@@ -35,7 +36,7 @@ def default_config_path() -> str:
     return os.environ.get("KASPAR_CONFIG", str(DEFAULT_CONFIG_PATH))
 
 
-class ConfigError(Exception):
+class ConfigError(KasparError):
     """A configuration that cannot be used, with where and why."""
 
     def __init__(self, source: str, key: str, message: str) -> None:

@@ -25,7 +25,7 @@ import msgspec
 import structlog
 
 from hal.clock import Clock
-from hal.errors import UnsafeCommand
+from hal.errors import KasparError, UnsafeCommand
 from hal.keyfob.api import KeyfobInput
 from hal.keyfob.gestures import ANSWERS_ONLY, GREEN, RED
 from hal.servos.joints import Joints
@@ -36,7 +36,7 @@ from kasparctl.config import Config
 
 log = structlog.get_logger("kasparctl.bringup")
 
-class BringUpError(Exception):
+class BringUpError(KasparError):
     """A bring-up command that cannot go on; the message says why and what to do."""
 
 

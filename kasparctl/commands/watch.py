@@ -14,10 +14,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from hal.errors import KasparError
 from kasparctl.config import ConfigError, default_config_path, load_config
 
 
-class NoStateDir(Exception):
+class NoStateDir(KasparError):
     """Neither --state-dir nor a configuration names the state directory."""
 
 

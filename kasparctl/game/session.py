@@ -41,6 +41,7 @@ from typing import Any, TypeVar
 import msgspec
 import structlog
 
+from hal.errors import KasparError
 from kasparctl.config import (
     Config,
     GameSettings,
@@ -71,7 +72,7 @@ UNDECODABLE = (msgspec.DecodeError, UnicodeDecodeError)
 RecordT = TypeVar("RecordT", bound=Record)
 
 
-class SessionError(Exception):
+class SessionError(KasparError):
     """A session directory that cannot be written or read back, with the path."""
 
 

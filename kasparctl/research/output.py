@@ -24,10 +24,12 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TextIO
 
+from hal.errors import KasparError
+
 PRIVATE_DIR = 0o700
 
 
-class OutputError(Exception):
+class OutputError(KasparError):
     """An output that would overwrite an input or another output, or cannot be written."""
 
 

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from hal.errors import KasparError
 from kasparctl.config import Config, ConfigError, default_config_path, load_config
 from kasparctl.learning.learner import LearnerParams
 from kasparctl.research.catalogue import (
@@ -28,7 +29,7 @@ from kasparctl.research.participants import Participants
 from kasparctl.research.progress import progress
 
 
-class SourceError(Exception):
+class SourceError(KasparError):
     """No usable state directory or configuration; the message says what to give."""
 
 

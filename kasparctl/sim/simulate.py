@@ -23,6 +23,7 @@ from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 
+from hal.errors import KasparError
 from kasparctl.config import GameSettings
 from kasparctl.game.problem import TargetProgress
 from kasparctl.game.recovery import all_rejected, rejected_after, to_reopen
@@ -41,7 +42,7 @@ from kasparctl.sim.teacher import Teacher, TeacherModel
 PILOT_LOCATIONS = ("location 1", "location 2", "location 3")
 
 
-class SimulationError(ValueError):
+class SimulationError(KasparError, ValueError):
     """Game settings the simulator cannot play."""
 
 
