@@ -96,6 +96,17 @@ def number(
     return _named(parse, "number")
 
 
+def finite(text: str) -> float:
+    """Any finite number (the room checks it against its own limits)."""
+    try:
+        value = float(text)
+    except ValueError:
+        _refuse("a finite number", text)
+    if not math.isfinite(value):
+        _refuse("a finite number", text)
+    return value
+
+
 def whole(low: int, high: int) -> Callable[[str], int]:
     """An integer from `low` to `high`."""
     expected = f"a whole number from {low} to {high}"

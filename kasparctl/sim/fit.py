@@ -46,6 +46,7 @@ PAPER = {
     "trials_min": 2,
     "trials_max": 7,
     "problems_given_up": 0,
+    "problems_learned_wrong": 0,
     "first_guess_correct": 7,
     "groups_first_right_twice": 0,
     "perseverative_errors": 1,
@@ -53,6 +54,14 @@ PAPER = {
     "initial_entropy": 2.585,
     "final_entropy_mean": 0.73,
     "final_entropy_sd": 0.58,
+}
+# The same figures as a study's statistics (kasparctl.learning.study_stats.StudyStats names),
+# with the rates they give: what `kasparctl simulate` prints beside its own.
+PAPER_STATS = {
+    **PAPER,
+    "first_guess_correct_rate": PAPER["first_guess_correct"] / PAPER["problems"],
+    "perseverative_error_rate": PAPER["perseverative_errors"] / PAPER["trials_total"],
+    "win_shift_rate": PAPER["win_shifts"] / PAPER["trials_total"],
 }
 PAPER_GROUPS = 16
 # The pilot's children: 3 greens for a wrong guess (no other mistake) in 202 trials, of which
