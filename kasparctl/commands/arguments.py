@@ -107,16 +107,18 @@ def finite(text: str) -> float:
     return value
 
 
-def whole(low: int, high: int) -> Callable[[str], int]:
-    """An integer from `low` to `high`."""
+def whole(low: int, high: int | None) -> Callable[[str], int]:
+    """An integer from `low` to `high` (no more than that; None: the room sets the limit)."""
     expected = f"a whole number from {low} to {high}"
+    if high is None:
+        expected = f"a whole number of at least {low}"
 
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             _refuse(expected, text)
-        if not low <= value <= high:
+        if value < low or (high is not None and value > high):
             raise argparse.ArgumentTypeError(f"expected {expected}, found {text}")
         return value
 
