@@ -246,6 +246,44 @@ def path(text: str) -> str:
     return text
 
 
+def add_sources(
+    parser: argparse.ArgumentParser, sessions: bool = True, condition: bool = False
+) -> None:
+    """Add SESSION..., --state-dir and --config (and --condition) to a research command.
+
+    kasparctl.research.source.read_sessions reads the sessions they name.
+    """
+    if sessions:
+        parser.add_argument(
+            "sessions",
+            nargs="*",
+            metavar="SESSION",
+            help="session ids or session directories (default: every session)",
+        )
+    parser.add_argument(
+        "--state-dir",
+        action="append",
+        default=None,
+        metavar="DIR",
+        help="a robot's state directory (default: the config's); repeat to pool several "
+        "robots or days",
+    )
+    parser.add_argument(
+        "--config",
+        default=None,
+        type=path,
+        help="kaspar.toml whose state_dir and learner profiles to use "
+        "(default: $KASPAR_CONFIG or /etc/kaspar/kaspar.toml)",
+    )
+    if condition:
+        parser.add_argument(
+            "--condition",
+            default=None,
+            metavar="LABEL",
+            help="only the sessions of this condition (profile/spoken or profile/silent)",
+        )
+
+
 def stdin_readable() -> bool:
     """Whether standard input is open (a closed one, `<&-`, has nothing to read keys from)."""
     stream = sys.stdin

@@ -15,10 +15,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from kasparctl.commands.arguments import path
+from kasparctl.commands.arguments import add_sources, path
 from kasparctl.research.cohort import teaching_by_place
 from kasparctl.research.output import check_outputs, text_output
-from kasparctl.research.source import SourceError, add_source_arguments, input_files, read_sessions
+from kasparctl.research.source import SourceError, input_files, read_sessions
 from kasparctl.sim.fit import fitted_teacher, fitted_teacher_file
 
 
@@ -29,7 +29,7 @@ def register(subparsers: Any) -> None:
         help="fit a model of the children's answers from recorded sessions",
         description=__doc__,
     )
-    add_source_arguments(parser, condition=True)
+    add_sources(parser, condition=True)
     parser.add_argument(
         "--out", required=True, type=path, metavar="FILE",
         help="the teacher model (TOML; '-': stdout)",

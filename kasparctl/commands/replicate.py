@@ -16,12 +16,11 @@ import argparse
 import json
 from typing import Any
 
-from kasparctl.commands.arguments import UsageError, seed, usage_of, whole
+from kasparctl.commands.arguments import UsageError, add_sources, seed, usage_of, whole
 from kasparctl.config import BUILTIN_PROFILES
 from kasparctl.research.cohort import cohort_of, teaching_by_place
 from kasparctl.research.source import (
     SourceError,
-    add_source_arguments,
     read_sessions,
     resolve_source,
 )
@@ -49,7 +48,7 @@ def register(subparsers: Any) -> None:
         help="place a cohort's (or the paper's) figures among simulated studies of its size",
         description=__doc__,
     )
-    add_source_arguments(parser, condition=True)
+    add_sources(parser, condition=True)
     add = parser.add_argument
     add("--paper", action="store_true", help="the cohort is the paper's pilot (section IV)")
     add("--readings", action="store_true",
