@@ -13,7 +13,7 @@ from emulators.herkulex import HerkulexEmulator
 from hal.servos import herkulex as hx
 from hal.servos.settings import JointSettings
 from kasparctl.cli import main
-from kasparctl.commands.calibration import Sweep, propose
+from kasparctl.bringup.calibration import Sweep, propose
 from kasparctl.config import load_config
 
 

@@ -150,9 +150,9 @@ def wholes(low: int, high: int) -> Callable[[str], tuple[int, ...]]:
     return _named(parse, "whole numbers")
 
 
-def whole_ranges(low: int, high: int) -> Callable[[str], list[int]]:
+def whole_ranges(low: int, high: int, what: str = "numbers") -> Callable[[str], list[int]]:
     """Whole numbers from `low` to `high` as ranges and single ones: "1-5,9"; sorted, once each."""
-    expected = f"numbers from {low} to {high} like 1-20 or 1,3,5"
+    expected = f"{what} like 1-20 or 1,3,5, within {low}-{high}"
 
     def parse(text: str) -> list[int]:
         found: set[int] = set()
@@ -230,6 +230,13 @@ def assignment(
             raise argparse.ArgumentTypeError(f"{key}: {error} (in {text!r})") from None
 
     return _named(parse, "assignment")
+
+
+def key(text: str) -> str:
+    """A name that is a TOML bare key (a pose's, a behaviour's): letters, digits, _ and -."""
+    if not re.fullmatch(r"[A-Za-z0-9_-]+", text):
+        _refuse("letters, digits, _ and -", text)
+    return text
 
 
 def language(text: str) -> str:

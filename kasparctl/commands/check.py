@@ -14,10 +14,10 @@ import argparse
 import sys
 from typing import Any
 
+from kasparctl.bringup.readiness import Result, Robot
 from kasparctl.commands.arguments import path
 from kasparctl.config import default_config_path
 from kasparctl.log import configure_logging
-from kasparctl.service.readiness import Result, Robot
 
 
 def register(subparsers: Any) -> None:

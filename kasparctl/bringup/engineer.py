@@ -1,4 +1,4 @@
-"""What `servos calibrate` and `pose record/play` share: the servos, the engineer, the end.
+"""What bring-up shares (calibrate, poses, behaviours): the servos, the engineer, the end.
 
 The servos are the configured backend's (the real buses or the simulated
 servos). Only the chosen joints go limp; every other joint holds where it is
