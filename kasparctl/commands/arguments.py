@@ -264,6 +264,7 @@ def add_sources(
         parser.add_argument(
             "sessions",
             nargs="*",
+            type=path,
             metavar="SESSION",
             help="session ids or session directories (default: every session)",
         )
@@ -271,6 +272,7 @@ def add_sources(
         "--state-dir",
         action="append",
         default=None,
+        type=path,
         metavar="DIR",
         help="a robot's state directory (default: the config's); repeat to pool several "
         "robots or days",

@@ -23,7 +23,7 @@ from kasparctl.body.behaviours import load_library
 from kasparctl.body.check import problems
 from kasparctl.bringup.behaviours import perform, play_real, record
 from kasparctl.bringup.engineer import BringUpError, Engineer, open_servos, select_joints
-from kasparctl.commands.arguments import names, number, path
+from kasparctl.commands.arguments import key, names, number, path
 from kasparctl.commands.motion import powered_sim, trajectory, write_csv
 from kasparctl.config import Config, default_config_path, load_config
 from kasparctl.log import configure_logging
@@ -45,7 +45,7 @@ def register(subparsers: Any) -> None:
     check.set_defaults(run=run_check)
 
     play = actions.add_parser("play", help="play a behaviour (simulated unless --real)")
-    play.add_argument("name")
+    play.add_argument("name", type=key)
     common(play)
     play.add_argument("--strength", type=number(0, 1), default=1.0, help="0 to 1 (default 1)")
     play.add_argument("--real", action="store_true",
@@ -55,7 +55,7 @@ def register(subparsers: Any) -> None:
     play.set_defaults(run=run_play)
 
     record = actions.add_parser("record", help="record a behaviour by moving the joints by hand")
-    record.add_argument("name")
+    record.add_argument("name", type=key)
     common(record)
     which = record.add_mutually_exclusive_group()
     which.add_argument("--group", help="the group to move (default: every joint)")

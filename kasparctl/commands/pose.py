@@ -51,7 +51,7 @@ def register(subparsers: Any) -> None:
     record.set_defaults(run=run_record)
 
     play = actions.add_parser("play", help="move to a recorded pose, within every limit")
-    play.add_argument("name")
+    play.add_argument("name", type=key)
     common(play)
     play.add_argument("--speed", type=number(0, 720, low_open=True, unit="deg/s"), default=None,
                       help="deg/s, at most each limit")

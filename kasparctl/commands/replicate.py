@@ -16,7 +16,7 @@ import argparse
 import json
 from typing import Any
 
-from kasparctl.commands.arguments import UsageError, add_sources, seed, usage_of, whole
+from kasparctl.commands.arguments import UsageError, add_sources, path, seed, usage_of, whole
 from kasparctl.config import BUILTIN_PROFILES
 from kasparctl.research.cohort import cohort_of, teaching_by_place
 from kasparctl.research.source import (
@@ -56,7 +56,7 @@ def register(subparsers: Any) -> None:
     add("--profile", default=None, help="the learner (default: the cohort's)")
     add("--exclude-learned", choices=EXCLUDE_RULES, default=None,
         help="withdraw a learned toy from later targets (default: the config's, else names)")
-    add("--teacher", default=None, metavar="FILE|honest",
+    add("--teacher", default=None, type=path, metavar="FILE|honest",
         help="the children: a teacher model file, or 'honest' (default: fitted from the "
         "cohort; the paper's 3 wrong greens for --paper)")
     add("--studies", type=whole(100, MAX_STUDIES), default=DEFAULT_STUDIES,

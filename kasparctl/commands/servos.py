@@ -11,7 +11,7 @@ from typing import Any
 from hal.servos.drivers import DRIVERS
 from hal.servos.settings import BAUD_RATES
 from kasparctl.bringup.servos import DEFAULT_IDS, format_row, read_joints, scan
-from kasparctl.commands.arguments import number, path, whole_ranges
+from kasparctl.commands.arguments import number, path, whole, whole_ranges
 from kasparctl.log import configure_logging
 
 
@@ -24,7 +24,8 @@ def register(subparsers: Any) -> None:
     scan_parser.add_argument("--port", required=True, type=path,
                              help="serial device, e.g. /dev/ttyUSB0")
     scan_parser.add_argument("--protocol", required=True, choices=sorted(DRIVERS))
-    scan_parser.add_argument("--baud", type=int, default=57600, choices=BAUD_RATES,
+    scan_parser.add_argument("--baud", type=whole(0, max(BAUD_RATES)), default=57600,
+                             choices=BAUD_RATES,
                              metavar="BAUD")
     scan_parser.add_argument(
         "--ids", type=whole_ranges(0, 253, "ids"), default=None,
@@ -54,14 +55,16 @@ def register(subparsers: Any) -> None:
     calibrate.register(commands)  # fmt: skip
 
 
-def _quiet_logging() -> None:
+def _quiet_logging(level: str = "warning") -> None:
     # stdout is the command's answer (maybe JSON for a script): the HAL's log goes to stderr.
-    configure_logging("warning", "console", stream=sys.stderr)
+    configure_logging(level, "console", stream=sys.stderr)
 
 
 def run_scan(arguments: argparse.Namespace) -> int:
     """Print the servos answering on a port; exit 1 if none does or the port cannot be opened."""
-    _quiet_logging()
+    # Errors only: a port that cannot be opened is the one line of the failure, not also
+    # the bus's warning that it will retry (a scan does not).
+    _quiet_logging("error")
     low, high = DEFAULT_IDS[arguments.protocol]
     ids = arguments.ids or list(range(low, high + 1))
     margin = arguments.margin_ms / 1000

@@ -44,6 +44,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--replay",
         metavar="SESSION",
+        type=path,
         default=None,
         help="replay a recorded session (its id, or its directory) instead of following",
     )
