@@ -72,7 +72,10 @@ PAPER_STATS = {
 PAPER_GROUPS = 16
 # The pilot's children: 3 greens for a wrong guess (no other mistake) in 202 trials, of which
 # about 106 were wrong guesses (202 less the two confirming greens of each of 48 problems).
-PILOT_TEACHER = Teacher(p_wrong_green=3 / 106)
+PAPER_WRONG_GREENS = 3
+PILOT_TEACHER = Teacher(
+    p_wrong_green=PAPER_WRONG_GREENS / (PAPER["trials_total"] - 2 * PAPER["problems"])
+)
 # The figures placed among the simulated studies, with the words the tables use.
 FIGURES = {
     "trials_total": "trials",
@@ -114,7 +117,8 @@ READINGS = (
     Reading(
         "project",
         "kasparctl's default: each location a problem over all 6 toys (Fig. 2: every "
-        "problem starts at log2 6 = 2.585 bits), Q0 = 0, rewards +1/-1, two greens in a row",
+        f"problem starts at log2 6 = {PAPER['initial_entropy']} bits), Q0 = 0, rewards +1/-1, "
+        "two greens in a row",
     ),
     Reading(
         "elimination",
@@ -125,7 +129,7 @@ READINGS = (
     Reading(
         "optimistic Q0",
         "Algorithm 1's 'Initialize Q0(s, a)' with Q0 = 0.5 (any constant still starts at "
-        "2.585 bits): the reading that reproduces the final entropy",
+        f"{PAPER['initial_entropy']} bits): the reading that reproduces the final entropy",
         initial_q=0.5,
     ),
     Reading(
