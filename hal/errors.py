@@ -1,17 +1,31 @@
-"""The HAL's named failures: every exception the HAL raises on purpose derives from HalError.
+"""The project's named failures: KasparError, the base of them all, and the HAL's own.
 
-A caller that must outlive hardware trouble (the game, the daemon) catches
-HalError. Where a failure used to surface as a built-in exception, its named
-class also derives from that built-in (UnknownJoint is a KeyError,
-SettingsError a ValueError), so older handlers keep working. Settings
-failures must stay ValueErrors: msgspec turns a ValueError raised while a
-settings table is decoded into a ValidationError naming the table.
+Every exception hal/ and kasparctl/ raise on purpose derives from KasparError:
+its message is written for a person (it names the file, key, device or option,
+what was expected and what was found), so the command line prints it as one
+line; anything else that escapes is a bug. The base lives here because hal may
+import nothing of kasparctl and every room may import hal.errors. (The one
+exception is kasparctl.learning.learner, which imports nothing of the project:
+its LearnerError is turned into the caller's own error where a person's value
+reaches the learner.)
+
+Every exception the HAL raises on purpose derives from HalError. A caller
+that must outlive hardware trouble (the game, the daemon) catches HalError.
+Where a failure used to surface as a built-in exception, its named class also
+derives from that built-in (UnknownJoint is a KeyError, SettingsError a
+ValueError), so older handlers keep working. Settings failures must stay
+ValueErrors: msgspec turns a ValueError raised while a settings table is
+decoded into a ValidationError naming the table.
 """
 
 from __future__ import annotations
 
 
-class HalError(Exception):
+class KasparError(Exception):
+    """Base of every error the project raises on purpose; its message is for a person."""
+
+
+class HalError(KasparError):
     """Base of every hardware-abstraction failure."""
 
 

@@ -13,13 +13,15 @@ import ctypes
 import os
 from collections.abc import Callable
 
+from hal.errors import KasparError
+
 CLOCK_MONOTONIC = 1
 TFD_TIMER_ABSTIME = 1
 TFD_CLOEXEC = os.O_CLOEXEC
 TFD_NONBLOCK = os.O_NONBLOCK
 
 
-class TimerUnavailable(OSError):
+class TimerUnavailable(KasparError, OSError):
     """No timerfd here (not Linux, or the call failed): wait on the event loop instead."""
 
 

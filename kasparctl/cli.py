@@ -5,8 +5,10 @@ function that adds its parser and sets `run`, a function of the parsed
 arguments returning the exit code.
 
 One contract for all of them (kasparctl.commands.arguments): a usage error exits 2
-with argparse's message; a failure exits 1 with one line naming its cause, never a
-traceback unless asked for (--debug, or KASPAR_DEBUG=1); a closed pipe exits 0.
+with one line naming the option; a failure exits 1 with one line naming its cause
+(the project's own errors derive from hal.errors.KasparError; anything else is a
+bug and says so), never a traceback unless asked for (--debug, or KASPAR_DEBUG=1);
+a closed pipe exits 0.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import traceback
 from collections.abc import Sequence
 
 from kasparctl import __version__
-from kasparctl.commands.arguments import UsageError, describe
+from kasparctl.commands.arguments import FAILURE_EXIT, USAGE_EXIT, Parser, UsageError, describe
 
 DEBUG_ENV = "KASPAR_DEBUG"
 
@@ -45,7 +47,7 @@ COMMAND_MODULES = (
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of every subcommand, each registered by its module."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="kasparctl", description="Controller of the Kaspar robot and its teaching game."
     )
     parser.add_argument("--version", action="version", version=f"kasparctl {__version__}")
@@ -62,8 +64,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one subcommand and return its exit code: 0, 1 on a failure (one line), 2 on a
-    usage error, 130 after Ctrl-C; 0 when the reader of its output went away."""
-    arguments = build_parser().parse_args(argv)  # a usage error exits 2 here
+    usage error, 130 after Ctrl-C; 0 when the reader of its output went away.
+
+    A bad argument found while parsing exits 2 here, in one line (SystemExit, as
+    argparse's --help and --version exit 0).
+    """
+    arguments = build_parser().parse_args(argv)
     debug = arguments.debug or os.environ.get(DEBUG_ENV, "") not in ("", "0")
     try:
         return int(arguments.run(arguments))
@@ -72,16 +78,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:
         return _pipe_closed()
     except UsageError as error:
-        print(f"kasparctl {arguments.command}: error: {error}", file=sys.stderr)
-        return 2
+        return _say(f"{arguments.usage_prog}: error: {error}", USAGE_EXIT)
     except Exception as error:
         if debug:
             traceback.print_exc()
-        try:
-            print(f"error: {describe(error)}", file=sys.stderr)
-        except BrokenPipeError:
-            return _pipe_closed()
-        return 1
+        return _say(f"error: {describe(error)}", FAILURE_EXIT)
+
+
+def _say(line: str, code: int) -> int:
+    """The one line of a usage error or a failure, on stderr; its exit code."""
+    try:
+        print(" ".join(line.split()), file=sys.stderr)
+    except BrokenPipeError:
+        return _pipe_closed()
+    return code
 
 
 def _pipe_closed() -> int:

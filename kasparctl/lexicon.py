@@ -31,6 +31,8 @@ from typing import Any, Final
 
 import msgspec
 
+from hal.errors import KasparError
+
 # The languages Kaspar ships a phrase book, a toy lexicon and a voice for.
 SHIPPED_LANGUAGES: Final = ("en", "nl", "de", "it", "fr")
 # The genders a toy may have, per language; a language not listed has none to give,
@@ -48,7 +50,7 @@ _FOLDER: Final = "toys"
 _LANGUAGE = re.compile(r"[A-Za-z]{2,3}(?:[_-][A-Za-z0-9]{2,8})*")
 
 
-class LexiconError(Exception):
+class LexiconError(KasparError):
     """A toy without the words a line needs, or a lexicon entry that cannot be used."""
 
     def __init__(self, source: str, key: str, message: str) -> None:

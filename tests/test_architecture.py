@@ -26,6 +26,7 @@ KASPARCTL_FLOORS: dict[str, int] = {
     "kasparctl.service": 5,
     "kasparctl.research": 5,
     "kasparctl.view": 5,
+    "kasparctl.bringup": 5,
     "kasparctl.commands": 6,
     "kasparctl.cli": 7,
     "kasparctl.__main__": 8,
@@ -35,7 +36,9 @@ KASPARCTL_FLOORS: dict[str, int] = {
 HAL_INTERFACES = ("hal", "hal.errors", "hal.clock", "hal.timerfd", "hal.keyfob.gestures")
 HAL_DEVICE_ROOMS = ("hal.servos", "hal.keyfob", "hal.voice")
 # Rooms that assemble real or simulated hardware and so may name implementations.
-ASSEMBLERS = ("hal.build", "kasparctl.sim", "kasparctl.service", "kasparctl.commands")
+ASSEMBLERS = (
+    "hal.build", "kasparctl.sim", "kasparctl.service", "kasparctl.bringup", "kasparctl.commands"
+)
 
 
 def room(module: str) -> str:

@@ -415,8 +415,8 @@ async def test_a_behaviour_recorded_by_hand_is_saved_as_offsets_and_reads_back(t
     import asyncio
     import io
 
-    from kasparctl.commands.behaviour import record
-    from kasparctl.commands.bringup import Engineer
+    from kasparctl.bringup.behaviours import record
+    from kasparctl.bringup.engineer import Engineer
 
     config = msgspec.structs.replace(
         CONFIG, body=msgspec.structs.replace(CONFIG.body, behaviours_dir=str(tmp_path)))

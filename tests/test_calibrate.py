@@ -12,8 +12,8 @@ from emulators.herkulex import HerkulexEmulator
 
 from hal.servos import herkulex as hx
 from hal.servos.settings import JointSettings
+from kasparctl.bringup.calibration import Sweep, propose
 from kasparctl.cli import main
-from kasparctl.commands.calibration import Sweep, propose
 from kasparctl.config import load_config
 
 

@@ -363,12 +363,12 @@ def test_simulate_into_a_closed_pipe_exits_quietly() -> None:
 def test_a_simulation_of_hours_is_refused_at_once_with_what_to_do() -> None:
     started = time.monotonic()
     result = run(["simulate", "--groups", "100000000"])
-    assert result.returncode == 1
+    assert result.returncode == 2  # a usage error
     assert time.monotonic() - started < 20
     assert "--groups: expected at most 1,000,000, found 100,000,000" in result.stderr
     assert "--power" in result.stderr
     sweep = run(["simulate", "--groups", "1000000", "--sweep", "alpha=0.1:1:0.1"])
-    assert sweep.returncode == 1 and "expected at most 20,000,000" in sweep.stderr
+    assert sweep.returncode == 2 and "expected at most 20,000,000" in sweep.stderr
 
 
 # -- scale: bench/bench_research_scale.py measures 200 MB of records (sessions, export,

@@ -229,8 +229,9 @@ def test_simulate_power_table_json_and_figure(tmp_path: Path, capsys: pytest.Cap
     ],
 )
 def test_power_options_are_checked(arguments: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["simulate", *arguments]) == 1
-    assert message in capsys.readouterr().err
+    assert main(["simulate", *arguments]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("kasparctl simulate: error: ") and message in line
 
 
 def test_group_values_are_each_groups_own() -> None:

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from kasparctl.commands.toml_patch import (
+from kasparctl.bringup.toml_patch import (
     TomlPatchError,
     format_value,
     set_joint_keys,

@@ -55,8 +55,13 @@ def test_errors_name_what_is_wrong(
     assert main(["watch", "--state-dir", str(tmp_path), "--replay", "nope"]) == 1
     err = capsys.readouterr().err
     assert "nope: no session to replay" in err and str(tmp_path / "sessions" / "nope") in err
-    assert main(["watch", "--state-dir", str(tmp_path), "--replay", "x", "--speed", "0"]) == 1
-    assert "--speed: expected a number > 0, found 0.0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:
+        main(["watch", "--state-dir", str(tmp_path), "--replay", "x", "--speed", "0"])
+    assert usage.value.code == 2
+    assert capsys.readouterr().err == (
+        "kasparctl watch: error: argument --speed: expected a number above 0 and up to 1e+06, "
+        "found 0\n"
+    )
     monkeypatch.setenv("KASPAR_CONFIG", str(tmp_path / "missing.toml"))
     assert main(["watch"]) == 1
     assert "no state directory: give --state-dir DIR" in capsys.readouterr().err

@@ -40,12 +40,14 @@ from typing import Any
 
 import msgspec
 
+from hal.errors import KasparError
+
 # A behaviour longer than this is a mistake in its file (a time in ms, not s).
 MAX_DURATION_S = 60.0
 NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 
 
-class BehaviourError(Exception):
+class BehaviourError(KasparError):
     """A behaviour file that cannot be used; the message names the file, the behaviour,
     the keyframe and the key, with what was expected and what was found."""
 

@@ -24,33 +24,23 @@ from kasparctl.commands.arguments import (
     UsageError,
     language,
     number,
+    path,
     seed,
     stdin_readable,
 )
-from kasparctl.config import UNCERTAINTY_MODES, Config, ConfigError, load_config
+from kasparctl.config import UNCERTAINTY_MODES, Config, load_config
 from kasparctl.game.language import with_language
-from kasparctl.game.lock import StateDirBusy, StateDirLock
-from kasparctl.game.phrases import PhraseError
-from kasparctl.game.storage import SessionError
-from kasparctl.learning.learner import LearnerError
+from kasparctl.game.lock import StateDirLock
 from kasparctl.log import configure_logging
 from kasparctl.sim.demo import (
     DemoOptions,
     DemoResult,
-    DemoStalled,
-    DemoStorageFailed,
     Transcript,
     demo_config,
     run_demo,
     with_variant,
 )
-from kasparctl.sim.teacher import (
-    DEFAULT_THINK_S,
-    Messiness,
-    Teacher,
-    TeacherError,
-    load_teacher,
-)
+from kasparctl.sim.teacher import DEFAULT_THINK_S, Messiness, Teacher, load_teacher
 
 # Slower than real time down to a thousandth; faster up to a million times (beyond, the
 # clock's steps are below what the loop can time: use --fast).
@@ -72,9 +62,12 @@ def register(subparsers: Any) -> None:
         "--interactive", action="store_true", help="you are the children: keys on the terminal"
     )
     parser.add_argument(
-        "--state-dir", default=None, help="keep the records here (default: a new temporary dir)"
+        "--state-dir", default=None, type=path,
+        help="keep the records here (default: a new temporary dir)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--config", default=None, type=path, help="kaspar.toml (default: the demo robot)"
     )
-    parser.add_argument("--config", default=None, help="kaspar.toml (default: the demo robot)")
     parser.add_argument("--variant", choices=("names", "pilot"), default=None)
     parser.add_argument(
         "--language",
@@ -96,6 +89,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--teacher",
         default=None,
+        type=path,
         metavar="FILE",
         help="children answering as a teacher model (`kasparctl fit-teacher`): its rates "
         "pooled, its reaction times",
@@ -134,27 +128,19 @@ def run(arguments: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
-    try:
-        config = load_config(arguments.config, playable=True) if arguments.config else demo_config()
-        if arguments.language:
-            config = with_language(config, arguments.language)
-        if arguments.variant and arguments.variant != config.game.variant:
-            config = with_variant(config, arguments.variant)
-        teacher = Teacher(arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)
-        think_s = DEFAULT_THINK_S
-        if arguments.teacher is not None:
-            if teacher != Teacher():
-                raise TeacherError(
-                    "--teacher: the model gives the rates; drop the --p-* options", "teacher"
-                )
-            model = load_teacher(arguments.teacher)
-            teacher, think_s = model.pooled(), model.think_s()
-        messiness = Messiness(
-            arguments.p_hold, arguments.p_double, arguments.p_both, arguments.p_early
-        )
-    except (ConfigError, TeacherError, LearnerError) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
+    teacher = Teacher(arguments.p_wrong_green, arguments.p_wrong_red, arguments.p_no_answer)
+    if arguments.teacher is not None and teacher != Teacher():
+        raise UsageError("--teacher: the model gives the rates; drop the --p-* options")
+    config = load_config(arguments.config, playable=True) if arguments.config else demo_config()
+    if arguments.language:
+        config = with_language(config, arguments.language)
+    if arguments.variant and arguments.variant != config.game.variant:
+        config = with_variant(config, arguments.variant)
+    think_s = DEFAULT_THINK_S
+    if arguments.teacher is not None:
+        model = load_teacher(arguments.teacher)
+        teacher, think_s = model.pooled(), model.think_s()
+    messiness = Messiness(arguments.p_hold, arguments.p_double, arguments.p_both, arguments.p_early)
     view = arguments.view and sys.stdout.isatty()
     if arguments.view and not view:
         print("note: --view: stdout is not a terminal, so the transcript", file=sys.stderr)
@@ -178,9 +164,6 @@ def run(arguments: argparse.Namespace) -> int:
     lock = StateDirLock(state_dir)
     try:
         lock.acquire()
-    except StateDirBusy as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
     except OSError as error:
         reason = error.strerror or str(error)
         print(f"error: {state_dir}: cannot use the state directory: {reason}", file=sys.stderr)
@@ -190,9 +173,6 @@ def run(arguments: argparse.Namespace) -> int:
             result = _with_view(config, options, arguments.speed)
         else:
             result = run_demo(config, options, speed=arguments.speed, fast=arguments.fast)
-    except (PhraseError, SessionError, ConfigError, DemoStalled, DemoStorageFailed) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
     finally:
         lock.release()
         sys.stderr.write(held_logs.getvalue())

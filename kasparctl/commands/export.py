@@ -16,16 +16,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from kasparctl.research.output import OutputError, check_outputs, closed_pipe
-from kasparctl.research.participants import (
-    NO_PARTICIPANTS,
-    Participants,
-    ParticipantsError,
-    load_participants,
-)
+from kasparctl.commands.arguments import add_sources, path
+from kasparctl.research.output import check_outputs
+from kasparctl.research.participants import NO_PARTICIPANTS, Participants, load_participants
 from kasparctl.research.source import (
-    SourceError,
-    add_source_arguments,
     input_files,
     read_sessions,
     report_unknown_codes,
@@ -38,12 +32,17 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "export", help="export trials to CSV for R or pandas", description=__doc__
     )
-    add_source_arguments(parser)
-    parser.add_argument("--csv", required=True, metavar="FILE", help="the trials CSV ('-': stdout)")
-    parser.add_argument("--events", metavar="FILE", help="also every non-trial record, as CSV")
+    add_sources(parser)
+    parser.add_argument(
+        "--csv", required=True, type=path, metavar="FILE", help="the trials CSV ('-': stdout)"
+    )
+    parser.add_argument(
+        "--events", metavar="FILE", type=path, help="also every non-trial record, as CSV"
+    )
     parser.add_argument(
         "--participants",
         metavar="FILE",
+        type=path,
         help="participants.csv: the children's attributes by code, joined to every row",
     )
     parser.add_argument(
@@ -56,32 +55,29 @@ def register(subparsers: Any) -> None:
 
 def run(arguments: argparse.Namespace) -> int:
     """Write the trials (and optionally the events) of every session as CSV."""
+    participants = _participants(arguments.participants)
+    source, catalogue = read_sessions(arguments)
+    sessions = catalogue.sessions
+    outputs = [("--csv", arguments.csv)]
+    if arguments.events:
+        outputs.append(("--events", arguments.events))
+    check_outputs(
+        outputs,
+        source.state_dirs,
+        [s.directory for s in sessions] + [d.directory for d in catalogue.damaged],
+        input_files(arguments),
+    )
+    report_unknown_codes(sessions, participants)
     try:
-        participants = _participants(arguments.participants)
-        source, catalogue = read_sessions(arguments)
-        sessions = catalogue.sessions
-        outputs = [("--csv", arguments.csv)]
-        if arguments.events:
-            outputs.append(("--events", arguments.events))
-        check_outputs(
-            outputs,
-            source.state_dirs,
-            [s.directory for s in sessions] + [d.directory for d in catalogue.damaged],
-            input_files(arguments),
-        )
-        report_unknown_codes(sessions, participants)
         rows = write_trials(arguments.csv, sessions, arguments.anonymise, participants)
         events = (
             write_events(arguments.events, sessions, arguments.anonymise)
             if arguments.events
             else None
         )
-    except BrokenPipeError:
-        return closed_pipe()
-    except (SourceError, OutputError, ParticipantsError) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
     except OSError as error:
+        if isinstance(error, BrokenPipeError):
+            raise  # `--csv - | head`: the command line ends quietly
         print(f"error: cannot write the CSV: {_why(error)}", file=sys.stderr)
         return 1
     # Stdout may be the CSV itself: the tally goes with the warnings.

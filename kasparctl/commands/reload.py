@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from kasparctl.commands.arguments import UsageError, number, whole
+from kasparctl.commands.arguments import UsageError, number, path, whole
 from kasparctl.log import PRIORITIES, connected_to_journal
 from kasparctl.service.reload import request_reload, runtime_directory
 
@@ -31,6 +31,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--runtime-dir",
         default=None,
+        type=path,
         help="where the service answers (default: $RUNTIME_DIRECTORY, as systemd sets it)",
     )
     parser.add_argument(

@@ -14,33 +14,28 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from typing import Any
 
-import msgspec
-
-from kasparctl.config import BUILTIN_PROFILES, GameSettings, ProfileSettings
-from kasparctl.learning.learner import LearnerError, LearnerParams
-from kasparctl.research.cohort import Cohort, CohortError, cohort_of, teaching_by_place
-from kasparctl.research.output import closed_pipe
+from kasparctl.commands.arguments import UsageError, add_sources, path, seed, usage_of, whole
+from kasparctl.config import BUILTIN_PROFILES
+from kasparctl.research.cohort import cohort_of, teaching_by_place
 from kasparctl.research.source import (
     SourceError,
-    add_source_arguments,
     read_sessions,
     resolve_source,
 )
+from kasparctl.sim import tables
 from kasparctl.sim.fit import (
-    FIGURES,
-    PAPER,
-    PAPER_GROUPS,
-    PILOT_TEACHER,
     Fit,
-    fit,
+    chosen_teacher,
+    cohort_game,
+    fit_cohort,
+    fit_paper,
     fit_readings,
-    simulate_studies,
+    fitted_teacher,
 )
-from kasparctl.sim.simulate import SimulationError, pilot_game, playable
-from kasparctl.sim.teacher import ChildTeacher, Teacher, TeacherError, TeacherModel, load_teacher
+from kasparctl.sim.request import EXCLUDE_RULES, learner
+from kasparctl.sim.simulate import OptionError
 
 DEFAULT_STUDIES = 10_000
 MAX_STUDIES = 200_000
@@ -53,121 +48,57 @@ def register(subparsers: Any) -> None:
         help="place a cohort's (or the paper's) figures among simulated studies of its size",
         description=__doc__,
     )
-    add_source_arguments(parser, condition=True)
-    parser.add_argument(
-        "--paper", action="store_true", help="the cohort is the paper's pilot (section IV)"
-    )
-    parser.add_argument(
-        "--readings",
-        action="store_true",
-        help="with --paper: the fit of each reading of the paper (the fit table)",
-    )
-    parser.add_argument("--profile", default=None, help="the learner (default: the cohort's)")
-    parser.add_argument(
-        "--exclude-learned",
-        choices=("names", "always", "never"),
-        default=None,
-        help="withdraw a learned toy from later targets (default: the config's, else names)",
-    )
-    parser.add_argument(
-        "--teacher",
-        default=None,
-        metavar="FILE|honest",
+    add_sources(parser, condition=True)
+    add = parser.add_argument
+    add("--paper", action="store_true", help="the cohort is the paper's pilot (section IV)")
+    add("--readings", action="store_true",
+        help="with --paper: the fit of each reading of the paper (the fit table)")
+    add("--profile", default=None, help="the learner (default: the cohort's)")
+    add("--exclude-learned", choices=EXCLUDE_RULES, default=None,
+        help="withdraw a learned toy from later targets (default: the config's, else names)")
+    add("--teacher", default=None, type=path, metavar="FILE|honest",
         help="the children: a teacher model file, or 'honest' (default: fitted from the "
-        "cohort; the paper's 3 wrong greens for --paper)",
-    )
-    parser.add_argument(
-        "--studies",
-        type=int,
-        default=DEFAULT_STUDIES,
-        help=f"simulated studies (default {DEFAULT_STUDIES:,})",
-    )
-    parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
-    parser.add_argument("--json", action="store_true", help="one JSON object")
-    parser.set_defaults(run=run)
-
-
-class UsageError(Exception):
-    """Options that do not fit together; the message names them."""
+        "cohort; the paper's 3 wrong greens for --paper)")
+    add("--studies", type=whole(100, MAX_STUDIES), default=DEFAULT_STUDIES,
+        help=f"simulated studies (default {DEFAULT_STUDIES:,})")
+    add("--seed", type=seed, default=1, help="random seed (default 1)")
+    add("--json", action="store_true", help="one JSON object")
+    parser.set_defaults(run=run)  # fmt: skip
 
 
 def run(arguments: argparse.Namespace) -> int:
     """Fit the model (or each reading) to the cohort and print the table."""
-    try:
-        if not 100 <= arguments.studies <= MAX_STUDIES:
-            raise UsageError(
-                f"--studies: expected 100 to {MAX_STUDIES:,}, found {arguments.studies:,}"
-            )
-        if arguments.readings and not arguments.paper:
-            raise UsageError("--readings: only with --paper (the readings are of the paper)")
-        if arguments.paper and arguments.sessions:
-            raise UsageError("--paper: the cohort is the paper's; name no sessions")
-        fits = _paper(arguments) if arguments.paper else [_cohort(arguments)]
-    except BrokenPipeError:
-        return closed_pipe()
-    except (
-        UsageError,
-        SourceError,
-        CohortError,
-        SimulationError,
-        TeacherError,
-        LearnerError,
-    ) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
-    try:
-        _print(fits, arguments.json)
-    except BrokenPipeError:
-        return closed_pipe()
-    return 0
-
-
-def _profiles(arguments: argparse.Namespace) -> tuple[dict[str, ProfileSettings], Any]:
-    source = resolve_source(arguments, needs_state_dir=False)
-    config = source.config
-    profiles = config.learner.all_profiles() if config else dict(BUILTIN_PROFILES)
-    return profiles, config
-
-
-def _params(profiles: dict[str, ProfileSettings], name: str) -> LearnerParams:
-    if name not in profiles:
+    if arguments.readings and not arguments.paper:
+        raise UsageError("--readings: only with --paper (the readings are of the paper)")
+    if arguments.paper and arguments.sessions:
+        raise UsageError("--paper: the cohort is the paper's; name no sessions")
+    if arguments.readings and (arguments.profile or arguments.exclude_learned or arguments.teacher):
         raise UsageError(
-            f"--profile: expected one of {', '.join(sorted(profiles))}, found {name!r}"
+            "--readings: each reading sets the learner, game and children; drop --profile, "
+            "--exclude-learned and --teacher"
         )
-    return profiles[name].params()
-
-
-def _teacher(
-    arguments: argparse.Namespace, default: Teacher | TeacherModel
-) -> Teacher | TeacherModel:
-    if arguments.teacher is None:
-        return default
-    if arguments.teacher == "honest":
-        return Teacher()
-    return load_teacher(arguments.teacher)
+    fits = _paper(arguments) if arguments.paper else [_cohort(arguments)]
+    if arguments.json:
+        print(json.dumps([{"label": label, **fit.plain()} for label, fit in fits], allow_nan=False))
+    else:
+        print(tables.fits(fits))
+    return 0
 
 
 def _paper(arguments: argparse.Namespace) -> list[tuple[str, Fit]]:
     if arguments.readings:
-        if arguments.profile or arguments.exclude_learned or arguments.teacher:
-            raise UsageError(
-                "--readings: each reading sets the learner, game and children; drop --profile, "
-                "--exclude-learned and --teacher"
-            )
         return [
             (f"{reading.name}: {reading.reason}", result)
             for reading, result in fit_readings(arguments.studies, arguments.seed)
         ]
-    profiles, config = _profiles(arguments)
-    params = _params(profiles, arguments.profile or "paper")
+    config = resolve_source(arguments, needs_state_dir=False).config
+    profiles = config.learner.all_profiles() if config else dict(BUILTIN_PROFILES)
+    profile = arguments.profile or "paper"
+    with usage_of(OptionError):
+        params = learner(profiles, profile)
     rule = arguments.exclude_learned or (config.game.exclude_learned_rule if config else "names")
-    game = pilot_game(exclude_learned_rule=rule)
-    teacher = _teacher(arguments, PILOT_TEACHER)
-    simulated = simulate_studies(
-        arguments.studies, PAPER_GROUPS, game, params, teacher, arguments.seed
-    )
-    label = f"the paper's pilot vs {arguments.profile or 'paper'}, exclude_learned {rule}"
-    return [(label, fit("paper", PAPER, simulated, PAPER_GROUPS))]
+    teacher = chosen_teacher(arguments.teacher)
+    return [fit_paper(profile, params, rule, teacher, arguments.studies, arguments.seed)]
 
 
 def _cohort(arguments: argparse.Namespace) -> tuple[str, Fit]:
@@ -176,95 +107,12 @@ def _cohort(arguments: argparse.Namespace) -> tuple[str, Fit]:
     if not sessions:
         raise SourceError("no sessions to replicate")
     cohort = cohort_of(sessions, source.params)
-    config = source.config
-    name = arguments.profile or cohort.profile
-    params = source.params(name)
-    game = _game(cohort, config.game if config else None, arguments.exclude_learned)
-    teacher = _teacher(arguments, _fitted(sessions))
-    simulated = simulate_studies(
-        arguments.studies, cohort.sessions, game, params, teacher, arguments.seed
+    profile = arguments.profile or cohort.profile
+    params = source.params(profile)
+    game = cohort_game(
+        cohort, source.config.game if source.config else None, arguments.exclude_learned
     )
-    label = (
-        f"{cohort.label}: {cohort.sessions} sessions vs {name}, {game.variant}, "
-        f"exclude_learned {game.exclude_learned_rule}"
-    )
-    return label, fit(cohort.label, cohort.figures, simulated, cohort.sessions)
-
-
-def _game(cohort: Cohort, configured: GameSettings | None, rule: str | None) -> GameSettings:
-    """The cohort's game: its variant, toys and targets; the rest from the config."""
-    base = configured or GameSettings()
-    rule = rule or base.exclude_learned_rule
-    if cohort.variant == "pilot":
-        locations = tuple(f"location {i + 1}" for i in range(max(cohort.targets, 1)))
-        game = msgspec.structs.replace(
-            base, variant="pilot", toys=cohort.toys, locations=locations, poses={}
-        )
-    else:
-        game = msgspec.structs.replace(
-            base, variant="names", toys=cohort.toys, locations=(), poses={}
-        )
-    return playable(msgspec.structs.replace(game, exclude_learned_rule=rule))
-
-
-def _fitted(sessions: Any) -> TeacherModel:
-    places = teaching_by_place(sessions)
-    if not places:
-        return TeacherModel.of(Teacher())
-    children = tuple(
-        ChildTeacher.fitted(
-            p.answers,
-            p.wrong_guesses,
-            p.false_greens,
-            p.right_guesses,
-            p.false_reds,
-            p.prompted,
-            p.reaction_times,
-        )
-        for p in places
-    )
-    return TeacherModel(children, f"fitted from {len(sessions)} sessions")
-
-
-def _p(p: float, studies: int) -> str:
-    """A Monte Carlo p-value, or how rare when no simulated study was as extreme."""
-    if round(p * (studies + 1)) <= 1:
-        return f"p < {1 / studies:.1g} (none of {studies:,} simulated studies)"
-    return f"p = {p:.4f}"
-
-
-def _print(fits: list[tuple[str, Fit]], as_json: bool) -> None:
-    if as_json:
-        print(
-            json.dumps(
-                [{"label": label, **result.plain()} for label, result in fits], allow_nan=False
-            )
-        )
-        return
-    for label, result in fits:
-        print(label)
-        print(
-            f"  {result.studies:,} simulated studies of {result.groups_per_study} groups; "
-            "percentile: share of simulated studies below the cohort (ties half); p two-sided"
-        )
-        print(
-            f"  {'figure':38} {'cohort':>8} {'model median':>13} {'95 % range':>17} "
-            f"{'percentile':>11} {'p':>7}"
-        )
-        for placed in result.placed:
-            spread = f"{placed.low:.2f}-{placed.high:.2f}"
-            print(
-                f"  {FIGURES[placed.figure]:38} {placed.cohort:>8.2f} {placed.median:>13.2f} "
-                f"{spread:>17} {placed.percentile:>10.1f}% {placed.p:>7.3f}"
-            )
-        if result.joint_trials_p is not None:
-            print(
-                "  trials to learn, mean and sd together: "
-                + _p(result.joint_trials_p, result.studies)
-            )
-        if result.entropy_with_win_shifts_p is not None:
-            print(
-                "  final entropy at least the cohort's with at most its win-shifts: "
-                + _p(result.entropy_with_win_shifts_p, result.studies)
-            )
-        print()
+    teacher = chosen_teacher(arguments.teacher)
+    if teacher is None:
+        teacher = fitted_teacher(teaching_by_place(sessions), len(sessions))
+    return fit_cohort(cohort, game, profile, params, teacher, arguments.studies, arguments.seed)

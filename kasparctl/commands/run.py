@@ -6,10 +6,8 @@ import argparse
 import sys
 from typing import Any
 
-from kasparctl.commands.arguments import UsageError, stdin_readable
-from kasparctl.config import ConfigError, default_config_path
-from kasparctl.game.lock import StateDirBusy
-from kasparctl.game.phrases import PhraseError
+from kasparctl.commands.arguments import UsageError, path, stdin_readable
+from kasparctl.config import default_config_path
 from kasparctl.service.daemon import DaemonOptions, run_daemon
 
 
@@ -19,6 +17,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--config",
         default=None,
+        type=path,
         help="kaspar.toml (default: $KASPAR_CONFIG or /etc/kaspar/kaspar.toml)",
     )
     parser.add_argument(
@@ -27,11 +26,14 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--keys",
         default=None,
+        type=path,
         metavar="FIFO",
         help="with --sim: the keyfob's keys from this fifo instead of standard input; "
         "it may appear after the start (a keyfob plugged in late) and go again",
     )
-    parser.add_argument("--state-dir", default=None, help="overrides the configured state_dir")
+    parser.add_argument(
+        "--state-dir", default=None, type=path, help="overrides the configured state_dir"
+    )
     parser.set_defaults(run=run)
 
 
@@ -53,8 +55,4 @@ def run(arguments: argparse.Namespace) -> int:
         state_dir=arguments.state_dir,
         keys=arguments.keys,
     )
-    try:
-        return run_daemon(options)
-    except (ConfigError, PhraseError, StateDirBusy) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
+    return run_daemon(options)

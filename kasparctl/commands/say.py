@@ -15,8 +15,8 @@ from hal.voice.api import Spoken
 from hal.voice.settings import VoiceSettings, voice_for_language
 from hal.voice.sinks import WavSink
 from hal.voice.speaker import Voice
-from kasparctl.commands.arguments import language
-from kasparctl.config import DEFAULT_CONFIG_PATH, Config, ConfigError, load_config
+from kasparctl.commands.arguments import language, path
+from kasparctl.config import DEFAULT_CONFIG_PATH, Config, load_config
 from kasparctl.log import configure_logging
 
 
@@ -24,9 +24,11 @@ def register(subparsers: Any) -> None:
     """Add the `say` subcommand."""
     parser = subparsers.add_parser("say", help="speak a line (or write it to a WAV file)")
     parser.add_argument("text", metavar="TEXT", help="what Kaspar says")
-    parser.add_argument("--wav", metavar="FILE", help="write a WAV file instead of playing it")
     parser.add_argument(
-        "--motion", metavar="CSV",
+        "--wav", metavar="FILE", type=path, help="write a WAV file instead of playing it"
+    )
+    parser.add_argument(
+        "--motion", metavar="CSV", type=path,
         help="also write the simulated robot's joint goals (time_s, joint, position_deg; "
         "time 0 = the WAV's first sample): the mouth following the line",
     )
@@ -41,6 +43,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--config",
         default=None,
+        type=path,
         help="kaspar.toml (default: $KASPAR_CONFIG, or /etc/kaspar/kaspar.toml if it exists)",
     )
     parser.set_defaults(run=run)
@@ -48,10 +51,10 @@ def register(subparsers: Any) -> None:
 
 def voice_settings(arguments: argparse.Namespace) -> VoiceSettings:
     """The voice settings of the configuration, with the command line's overrides."""
-    path = arguments.config or os.environ.get("KASPAR_CONFIG")
-    if path is None and DEFAULT_CONFIG_PATH.exists():
-        path = str(DEFAULT_CONFIG_PATH)
-    settings = load_config(path).voice if path else VoiceSettings()
+    config_path = arguments.config or os.environ.get("KASPAR_CONFIG")
+    if config_path is None and DEFAULT_CONFIG_PATH.exists():
+        config_path = str(DEFAULT_CONFIG_PATH)
+    settings = load_config(config_path).voice if config_path else VoiceSettings()
     if arguments.language:
         settings = msgspec.structs.replace(settings, voice=voice_for_language(arguments.language))
     if arguments.engine:
@@ -73,11 +76,7 @@ def run(arguments: argparse.Namespace) -> int:
     """Say a line with the configured voice; exit 1 if it could not be said."""
     # Warnings (an engine falling back) go to stderr; stdout stays for results.
     configure_logging("warning", "console", stream=sys.stderr)
-    try:
-        settings = voice_settings(arguments)
-    except ConfigError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
+    settings = voice_settings(arguments)
     if arguments.wav:
         folder = Path(arguments.wav).resolve().parent
         if not folder.is_dir():
@@ -101,14 +100,10 @@ def say_motion(arguments: argparse.Namespace, settings: VoiceSettings) -> int:
     """`say --motion`: the line rendered with the simulated body's mouth (commands.motion)."""
     from kasparctl.commands.motion import say_with_motion
 
-    path = arguments.config or os.environ.get("KASPAR_CONFIG")
-    if path is None and DEFAULT_CONFIG_PATH.exists():
-        path = str(DEFAULT_CONFIG_PATH)
-    try:
-        config = load_config(path, poses=False) if path else demo_config()
-    except ConfigError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
+    config_path = arguments.config or os.environ.get("KASPAR_CONFIG")
+    if config_path is None and DEFAULT_CONFIG_PATH.exists():
+        config_path = str(DEFAULT_CONFIG_PATH)
+    config = load_config(config_path, poses=False) if config_path else demo_config()
     spoken, rows = say_with_motion(
         config, settings, arguments.text, arguments.key, arguments.wav, arguments.motion
     )

@@ -13,9 +13,9 @@ import json
 import sys
 from typing import Any
 
+from kasparctl.commands.arguments import add_sources
 from kasparctl.research.catalogue import Damaged, SessionData
-from kasparctl.research.output import closed_pipe
-from kasparctl.research.source import SourceError, add_source_arguments, read_sessions
+from kasparctl.research.source import read_sessions
 
 COLUMNS = (
     "session_name",
@@ -36,7 +36,7 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "sessions", help="list the recorded sessions", description=__doc__
     )
-    add_source_arguments(parser, sessions=False)
+    add_sources(parser, sessions=False)
     parser.add_argument("--json", action="store_true", help="one JSON array, for scripts")
     parser.set_defaults(run=run)
 
@@ -68,29 +68,23 @@ def describe_damaged(damaged: Damaged) -> dict[str, Any]:
 
 def run(arguments: argparse.Namespace) -> int:
     """List every session of the state directories: ids, group, condition, date, status."""
-    try:
-        # Damaged sessions are part of the listing, not warnings beside it.
-        source, catalogue = read_sessions(arguments, report_damaged=False)
-        rows = [describe(session) for session in catalogue.sessions]
-        damaged = [describe_damaged(d) for d in catalogue.damaged]
-        if arguments.json:
-            print(json.dumps(rows + damaged, indent=1))
-            return 0
-        if not rows and not damaged:
-            where = ", ".join(str(d) for d in source.state_dirs)
-            print(f"no sessions in {where}")
-            return 0
-        table = [list(COLUMNS), *([str(row[column]) for column in COLUMNS] for row in rows)]
-        widths = [max(len(line[index]) for line in table) for index in range(len(COLUMNS))]
-        for line in table:
-            cells = (text.ljust(width) for text, width in zip(line, widths, strict=True))
-            print("  ".join(cells).rstrip())
-        for row in damaged:
-            print(f"damaged: {row['reason']}")
-        sys.stdout.flush()
-    except BrokenPipeError:
-        return closed_pipe()
-    except SourceError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
+    # Damaged sessions are part of the listing, not warnings beside it.
+    source, catalogue = read_sessions(arguments, report_damaged=False)
+    rows = [describe(session) for session in catalogue.sessions]
+    damaged = [describe_damaged(d) for d in catalogue.damaged]
+    if arguments.json:
+        print(json.dumps(rows + damaged, indent=1))
+        return 0
+    if not rows and not damaged:
+        where = ", ".join(str(d) for d in source.state_dirs)
+        print(f"no sessions in {where}")
+        return 0
+    table = [list(COLUMNS), *([str(row[column]) for column in COLUMNS] for row in rows)]
+    widths = [max(len(line[index]) for line in table) for index in range(len(COLUMNS))]
+    for line in table:
+        cells = (text.ljust(width) for text, width in zip(line, widths, strict=True))
+        print("  ".join(cells).rstrip())
+    for row in damaged:
+        print(f"damaged: {row['reason']}")
+    sys.stdout.flush()
     return 0

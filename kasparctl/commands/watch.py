@@ -14,10 +14,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from hal.errors import KasparError
+from kasparctl.commands.arguments import number, path
 from kasparctl.config import ConfigError, default_config_path, load_config
 
 
-class NoStateDir(Exception):
+class NoStateDir(KasparError):
     """Neither --state-dir nor a configuration names the state directory."""
 
 
@@ -29,23 +31,27 @@ def register(subparsers: Any) -> None:
         description=__doc__,
     )
     parser.add_argument(
-        "--state-dir", default=None, help="the robot's state directory (default: the config's)"
-    )
+        "--state-dir", default=None, type=path,
+        help="the robot's state directory (default: the config's)",
+    )  # fmt: skip
     parser.add_argument(
         "--config",
         default=None,
+        type=path,
         help="kaspar.toml naming the state directory "
         "(default: $KASPAR_CONFIG or /etc/kaspar/kaspar.toml)",
     )
     parser.add_argument(
         "--replay",
         metavar="SESSION",
+        type=path,
         default=None,
         help="replay a recorded session (its id, or its directory) instead of following",
     )
     parser.add_argument(
-        "--speed", type=float, default=1.0, help="replay N times faster than it was recorded"
-    )
+        "--speed", type=number(0, 1e6, low_open=True), default=1.0,
+        help="replay N times faster than it was recorded",
+    )  # fmt: skip
     parser.add_argument(
         "--plain", action="store_true", help="plain text even on a terminal that can do more"
     )
@@ -72,33 +78,23 @@ def run(arguments: argparse.Namespace) -> int:
     """Follow (or replay) a session in the live view."""
     # Imported here: the daemon, which imports every command module, does not need the view.
     from kasparctl.view import main as view
-    from kasparctl.view.inotify import InotifyError
-    from kasparctl.view.replay import ReplayError
     from kasparctl.view.screen import rich_available
 
-    if not arguments.speed > 0:
-        print(f"error: --speed: expected a number > 0, found {arguments.speed}", file=sys.stderr)
-        return 1
     try:
         state_dir: Path | None = state_dir_of(arguments)
-    except (ConfigError, NoStateDir) as error:
+    except (ConfigError, NoStateDir):
         if arguments.replay is None or not Path(arguments.replay).is_dir():
-            print(f"error: {error}", file=sys.stderr)
-            return 1
+            raise
         state_dir = None  # a session directory given as it is needs no state directory
     if sys.stdout.isatty() and not (arguments.plain or arguments.once) and not rich_available():
         print(
             "note: plain text; for the full-screen view: pip install 'kasparctl[view]'",
             file=sys.stderr,
         )
-    try:
-        if arguments.replay is not None or state_dir is None:
-            view.replay(arguments.replay, state_dir, arguments.speed, arguments.plain)
-        elif arguments.once:
-            view.print_once(state_dir)
-        else:
-            view.follow(state_dir, arguments.plain)
-    except (ReplayError, InotifyError) as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
+    if arguments.replay is not None or state_dir is None:
+        view.replay(arguments.replay, state_dir, arguments.speed, arguments.plain)
+    elif arguments.once:
+        view.print_once(state_dir)
+    else:
+        view.follow(state_dir, arguments.plain)
     return 0

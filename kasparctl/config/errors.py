@@ -6,8 +6,10 @@ the message saying what was expected and what was found.
 
 from __future__ import annotations
 
+from hal.errors import KasparError
 
-class ConfigError(Exception):
+
+class ConfigError(KasparError):
     """A configuration that cannot be used, with where and why."""
 
     def __init__(self, source: str, key: str, message: str) -> None:

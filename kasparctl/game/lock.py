@@ -15,10 +15,12 @@ import fcntl
 import os
 from pathlib import Path
 
+from hal.errors import KasparError
+
 PROC_LOCKS = Path("/proc/locks")
 
 
-class StateDirBusy(Exception):
+class StateDirBusy(KasparError):
     """Another process already writes to this state directory."""
 
     def __init__(self, directory: Path, holder: int | None) -> None:

@@ -38,6 +38,7 @@ from typing import Any, Final, NoReturn
 
 import numpy as np
 
+from hal.errors import KasparError
 from kasparctl.game.scripts import (
     ALL_LEVELS,
     DEFAULT_SCRIPT,
@@ -50,7 +51,7 @@ from kasparctl.game.scripts import Band as Band  # figures shade a script's band
 from kasparctl.lexicon import TOY_FORMS, ToyWords, shipped_words
 
 
-class PhraseError(Exception):
+class PhraseError(KasparError):
     """A phrase file that cannot be used, or a line asked for wrongly, with where and why."""
 
     def __init__(self, source: str, key: str, message: str) -> None:

@@ -14,8 +14,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from hal.errors import KasparError
 
-class ProblemError(ValueError):
+
+class ProblemError(KasparError, ValueError):
     """A guess recorded on a problem that is already over, or unusable limits."""
 
 

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Final
 
+from hal.errors import KasparError
+
 # How close to the maximum log2(n) counts as "no idea". Not 1e-9: entropies
 # arrive rounded (the paper reports 2.585 for log2(6) = 2.58496 and 1.58 for
 # log2(3)), and within 0.01 bits of uniform no listener could tell the
@@ -45,7 +47,7 @@ DEFAULT_SCRIPT: Final = "paper"
 LEGACY_SCRIPT: Final = "varied"
 
 
-class ScriptError(ValueError):
+class ScriptError(KasparError, ValueError):
     """An entropy no distribution over the candidates can have, or an unknown script."""
 
 

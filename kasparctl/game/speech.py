@@ -22,16 +22,17 @@ import asyncio
 import contextlib
 from collections.abc import Callable
 
+from hal.errors import KasparError
 from hal.voice.api import SpokenStatus, VoiceOutput
 from kasparctl.game.phrases import PhraseBook, PhrasePicker
 from kasparctl.game.records import HalEvent, HalRecord
 
 
-class VoiceFailed(Exception):
+class VoiceFailed(KasparError):
     """Kaspar could not say a line: the session cannot go on unheard."""
 
 
-class SpeechCut(Exception):
+class SpeechCut(KasparError):
     """A line was cut short by voice.cancel(); not a task cancellation, which must
     never be swallowed (the daemon's stop cancels the game's own task)."""
 

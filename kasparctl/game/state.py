@@ -21,6 +21,7 @@ import msgspec
 import numpy as np
 from msgspec import UNSET, UnsetType
 
+from hal.errors import KasparError
 from kasparctl.config import GameSettings
 from kasparctl.game.problem import TargetProgress
 from kasparctl.game.records import (
@@ -43,7 +44,7 @@ from kasparctl.vocabulary import Command
 __all__ = ["STEPS", "GameState", "StateError", "UndoEntry", "far_from", "median_pose", "restore"]
 
 
-class StateError(ValueError):
+class StateError(KasparError, ValueError):
     """A record that does not fit the state it is applied to, or a damaged snapshot."""
 
 

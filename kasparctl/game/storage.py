@@ -20,13 +20,15 @@ from pathlib import Path
 
 import structlog
 
+from hal.errors import KasparError
+
 log = structlog.get_logger(__name__)
 
 PRIVATE_FILE = 0o600
 PRIVATE_DIR = 0o700
 
 
-class SessionError(Exception):
+class SessionError(KasparError):
     """A session directory that cannot be written or read back, with the path."""
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import msgspec
 
+from hal.errors import KasparError
 from kasparctl.config import CONDITION_LABELS, SPOKEN_MODES
 from kasparctl.game.records import (
     AnyRecord,
@@ -40,7 +41,7 @@ _CROCKFORD = "0123456789ABCDEFGHJKMNPQRSTVWXYZ"
 ULID = re.compile(r"[0-9A-HJKMNP-TV-Z]{26}")
 
 
-class CatalogueError(Exception):
+class CatalogueError(KasparError):
     """A state directory or a named session that cannot be found or listed, with its path."""
 
 

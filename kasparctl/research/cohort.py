@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from hal.errors import KasparError
 from kasparctl.game.records import PromptRecord, TrialRecord
 from kasparctl.learning.learner import LearnerParams
 from kasparctl.research.catalogue import SessionData
@@ -19,7 +20,7 @@ from kasparctl.research.conditions import by_condition
 from kasparctl.research.walk import walk
 
 
-class CohortError(ValueError):
+class CohortError(KasparError, ValueError):
     """Sessions that do not make one cohort; the message says what to give."""
 
 

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from hal.errors import KasparError
 from kasparctl.game.phrases import Band
 from kasparctl.research.children import ChildMeasures
 from kasparctl.research.conditions import Condition
@@ -50,7 +51,7 @@ MAX_PLOTTED_GUESSES = 500
 MAX_BINS = 32
 
 
-class FiguresUnavailable(Exception):
+class FiguresUnavailable(KasparError):
     """matplotlib is not installed; the message says how to install it."""
 
 

@@ -24,10 +24,12 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TextIO
 
+from hal.errors import KasparError
+
 PRIVATE_DIR = 0o700
 
 
-class OutputError(Exception):
+class OutputError(KasparError):
     """An output that would overwrite an input or another output, or cannot be written."""
 
 
@@ -83,7 +85,11 @@ def _fsync_directory(directory: Path) -> None:
 def atomic_file(path: Path) -> Iterator[io.BufferedWriter]:
     """A binary stream whose bytes appear at `path` (0600) only once the block completes."""
     directory = path.parent if str(path.parent) else Path(".")
-    fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    try:
+        fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    except OSError as error:
+        # The person named the file, not its temporary twin.
+        raise OSError(error.errno, error.strerror, str(path)) from error
     try:
         with os.fdopen(fd, "wb") as stream:
             yield stream

@@ -20,6 +20,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from hal.errors import KasparError
 from kasparctl.config import CODE_PATTERN
 
 CODE = re.compile(CODE_PATTERN)
@@ -31,7 +32,7 @@ NUMERIC_RANGES = {"age": (0.0, 120.0), "age_months": (0.0, 1440.0)}
 Value = str | float | None
 
 
-class ParticipantsError(Exception):
+class ParticipantsError(KasparError):
     """participants.csv is unusable; the message names file, line, column, expected, found."""
 
 

@@ -1,7 +1,8 @@
-"""Progress bars on a terminal for long exports and reports; silent otherwise.
+"""The project's one progress bar, on a terminal, for long exports, reports and simulations.
 
 tqdm is optional (the `progress` extra): without it, or when stderr is not a
-terminal (a pipe, a log, a test), the items pass through untouched.
+terminal (a pipe, a log, a test), or when the items are few, the items pass
+through untouched.
 """
 
 from __future__ import annotations
@@ -17,12 +18,23 @@ MINIMUM_ITEMS = 20
 
 
 def progress(
-    items: Iterable[T], what: str, unit: str = "item", stream: TextIO | None = None
+    items: Iterable[T],
+    what: str,
+    unit: str = "item",
+    stream: TextIO | None = None,
+    *,
+    total: int | None = None,
+    minimum: int = MINIMUM_ITEMS,
 ) -> Iterator[T]:
-    """The items, with a bar on `stream` (stderr) when it is a terminal and they are many."""
+    """The items, with a bar on `stream` (stderr) when it is a terminal and they are many.
+
+    `total` is how many there are when `items` cannot say (a generator); below
+    `minimum` items there is no bar.
+    """
     stream = stream or sys.stderr
-    total = len(items) if isinstance(items, Sized) else None
-    if not stream.isatty() or (total is not None and total < MINIMUM_ITEMS):
+    if total is None and isinstance(items, Sized):
+        total = len(items)
+    if not stream.isatty() or (total is not None and total < minimum):
         return iter(items)
     try:
         from tqdm import tqdm  # type: ignore[import-untyped]  # tqdm ships no type hints

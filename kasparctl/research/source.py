@@ -4,7 +4,8 @@ Kept to two rules so a researcher can predict it: explicit --state-dir options
 win (several pool robots or days into one study); otherwise the configuration
 (--config, else $KASPAR_CONFIG, else /etc/kaspar/kaspar.toml) names it. A
 configuration given with --config is also where learner profiles beyond the
-built-in ones are defined.
+built-in ones are defined. (kasparctl.commands.arguments.add_sources adds these
+options to a command.)
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from hal.errors import KasparError
 from kasparctl.config import Config, ConfigError, default_config_path, load_config
 from kasparctl.learning.learner import LearnerParams
 from kasparctl.research.catalogue import (
@@ -28,42 +30,8 @@ from kasparctl.research.participants import Participants
 from kasparctl.research.progress import progress
 
 
-class SourceError(Exception):
+class SourceError(KasparError):
     """No usable state directory or configuration; the message says what to give."""
-
-
-def add_source_arguments(
-    parser: argparse.ArgumentParser, sessions: bool = True, condition: bool = False
-) -> None:
-    """Add SESSION..., --state-dir and --config (and --condition) to a research command."""
-    if sessions:
-        parser.add_argument(
-            "sessions",
-            nargs="*",
-            metavar="SESSION",
-            help="session ids or session directories (default: every session)",
-        )
-    parser.add_argument(
-        "--state-dir",
-        action="append",
-        default=None,
-        metavar="DIR",
-        help="a robot's state directory (default: the config's); repeat to pool several "
-        "robots or days",
-    )
-    parser.add_argument(
-        "--config",
-        default=None,
-        help="kaspar.toml whose state_dir and learner profiles to use "
-        "(default: $KASPAR_CONFIG or /etc/kaspar/kaspar.toml)",
-    )
-    if condition:
-        parser.add_argument(
-            "--condition",
-            default=None,
-            metavar="LABEL",
-            help="only the sessions of this condition (profile/spoken or profile/silent)",
-        )
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,7 @@ import numpy as np
 
 from hal import Hardware
 from hal.clock import LoopClock
+from hal.errors import KasparError
 from hal.keyfob.sim import COMMAND_GESTURES, SimKeyfob, TerminalKeyfob
 from hal.servos.api import ServoApi
 from hal.servos.sim import SimServos
@@ -576,11 +577,11 @@ def _how_hard(strength: float) -> str:
 STALL_LIMIT_S = 12 * 3600.0
 
 
-class DemoStalled(Exception):
+class DemoStalled(KasparError):
     """A simulated game that stopped making progress."""
 
 
-class DemoStorageFailed(Exception):
+class DemoStorageFailed(KasparError):
     """The demo's records could not be saved (the disk full, the directory gone): it ended."""
 
 

@@ -17,23 +17,29 @@ placed among the simulated studies' values:
 
 The paper's readings (`READINGS`) are the ways of reading its text that this
 module compares; docs/simulation.md gives the table and the command.
+
+The cohort's children are modelled here too (`fitted_teacher`): one child per
+place in the turn order, from what the children at that place did
+(kasparctl.research.cohort counts it; this room never sees a session).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
+import msgspec
 import numpy as np
 from numpy.typing import NDArray
 
 from kasparctl.config import GameSettings
 from kasparctl.learning.learner import LearnerParams
-from kasparctl.sim.simulate import pilot_game
+from kasparctl.sim.simulate import pilot_game, playable
 from kasparctl.sim.studies import GroupTable, simulate_groups, study_values
-from kasparctl.sim.teacher import Teacher, TeacherModel
+from kasparctl.sim.teacher import ChildTeacher, Teacher, TeacherModel, load_teacher, teacher_toml
 
 FloatArray = NDArray[np.float64]
 
@@ -46,6 +52,7 @@ PAPER = {
     "trials_min": 2,
     "trials_max": 7,
     "problems_given_up": 0,
+    "problems_learned_wrong": 0,
     "first_guess_correct": 7,
     "groups_first_right_twice": 0,
     "perseverative_errors": 1,
@@ -54,10 +61,21 @@ PAPER = {
     "final_entropy_mean": 0.73,
     "final_entropy_sd": 0.58,
 }
+# The same figures as a study's statistics (kasparctl.learning.study_stats.StudyStats names),
+# with the rates they give: what `kasparctl simulate` prints beside its own.
+PAPER_STATS = {
+    **PAPER,
+    "first_guess_correct_rate": PAPER["first_guess_correct"] / PAPER["problems"],
+    "perseverative_error_rate": PAPER["perseverative_errors"] / PAPER["trials_total"],
+    "win_shift_rate": PAPER["win_shifts"] / PAPER["trials_total"],
+}
 PAPER_GROUPS = 16
 # The pilot's children: 3 greens for a wrong guess (no other mistake) in 202 trials, of which
 # about 106 were wrong guesses (202 less the two confirming greens of each of 48 problems).
-PILOT_TEACHER = Teacher(p_wrong_green=3 / 106)
+PAPER_WRONG_GREENS = 3
+PILOT_TEACHER = Teacher(
+    p_wrong_green=PAPER_WRONG_GREENS / (PAPER["trials_total"] - 2 * PAPER["problems"])
+)
 # The figures placed among the simulated studies, with the words the tables use.
 FIGURES = {
     "trials_total": "trials",
@@ -99,7 +117,8 @@ READINGS = (
     Reading(
         "project",
         "kasparctl's default: each location a problem over all 6 toys (Fig. 2: every "
-        "problem starts at log2 6 = 2.585 bits), Q0 = 0, rewards +1/-1, two greens in a row",
+        f"problem starts at log2 6 = {PAPER['initial_entropy']} bits), Q0 = 0, rewards +1/-1, "
+        "two greens in a row",
     ),
     Reading(
         "elimination",
@@ -110,7 +129,7 @@ READINGS = (
     Reading(
         "optimistic Q0",
         "Algorithm 1's 'Initialize Q0(s, a)' with Q0 = 0.5 (any constant still starts at "
-        "2.585 bits): the reading that reproduces the final entropy",
+        f"{PAPER['initial_entropy']} bits): the reading that reproduces the final entropy",
         initial_q=0.5,
     ),
     Reading(
@@ -292,3 +311,156 @@ def fit_readings(
         )
         results.append((reading, fit(reading.name, PAPER, simulated, PAPER_GROUPS)))
     return results
+
+
+# -- the cohort: its game, its children, its fit -------------------------------------------
+
+
+class PlaceTally(Protocol):
+    """What the children at one place in the turn order did, over every session."""
+
+    @property
+    def answers(self) -> int:
+        """Answers that count (none undone)."""
+    @property
+    def wrong_guesses(self) -> int:
+        """Wrong guesses answered, in sessions with an answer key."""
+    @property
+    def false_greens(self) -> int:
+        """Greens for a wrong guess."""
+    @property
+    def right_guesses(self) -> int:
+        """Right guesses answered, in sessions with an answer key."""
+    @property
+    def false_reds(self) -> int:
+        """Reds for a right guess."""
+    @property
+    def prompted(self) -> int:
+        """Questions that needed at least one prompt."""
+    @property
+    def reaction_times(self) -> Sequence[float]:
+        """Seconds from each question to its answer."""
+
+
+class CohortFigures(Protocol):
+    """Recorded sessions of one condition as a study (kasparctl.research.cohort.Cohort)."""
+
+    @property
+    def label(self) -> str:
+        """The condition's label."""
+    @property
+    def sessions(self) -> int:
+        """Its sessions, each a group of children."""
+    @property
+    def variant(self) -> str:
+        """The game variant played."""
+    @property
+    def toys(self) -> tuple[str, ...]:
+        """The toys, in the game's order."""
+    @property
+    def targets(self) -> int:
+        """Targets (locations or bags) per session."""
+    @property
+    def figures(self) -> Mapping[str, float]:
+        """Its figures by FIGURES' names."""
+
+
+def fitted_teacher(places: Sequence[PlaceTally], sessions: int) -> TeacherModel:
+    """The children of `sessions` recorded sessions: one ChildTeacher fitted per place.
+
+    Without a single answer to fit, every child is honest.
+    """
+    if not places:
+        return TeacherModel.of(Teacher())
+    children = tuple(
+        ChildTeacher.fitted(
+            p.answers,
+            p.wrong_guesses,
+            p.false_greens,
+            p.right_guesses,
+            p.false_reds,
+            p.prompted,
+            p.reaction_times,
+        )
+        for p in places
+    )
+    return TeacherModel(children, f"fitted from {sessions} sessions")
+
+
+def fitted_teacher_file(
+    model: TeacherModel, sessions: int, keyed: int, groups: Sequence[str]
+) -> str:
+    """The fitted model as the TOML file `kasparctl fit-teacher` writes, saying what it is."""
+    comment = "\n".join(
+        [
+            "kasparctl teacher model, written by `kasparctl fit-teacher`.",
+            f"From {sessions} sessions ({keyed} with an answer key); groups: "
+            + ", ".join(sorted(set(groups))),
+            "One [[children]] table per place in the turn order (the first child first).",
+            "p_wrong_green: greens for a wrong guess / wrong guesses answered;",
+            "p_wrong_red: reds for a right guess / right guesses answered;",
+            "p_prompt: questions that needed a prompt / questions;",
+            "reaction_time_median (s) and reaction_time_log_sd: a log-normal;",
+            "answers: how many answers each child's rates rest on.",
+        ]
+    )
+    return teacher_toml(model, comment)
+
+
+def chosen_teacher(choice: str | None) -> Teacher | TeacherModel | None:
+    """--teacher FILE|honest: a model file's children, honest ones, or None when not given."""
+    if choice is None:
+        return None
+    return Teacher() if choice == "honest" else load_teacher(choice)
+
+
+def cohort_game(
+    cohort: CohortFigures, configured: GameSettings | None, rule: str | None
+) -> GameSettings:
+    """The cohort's game: its variant, toys and targets; the rest from the configuration."""
+    base = configured or GameSettings()
+    rule = rule or base.exclude_learned_rule
+    if cohort.variant == "pilot":
+        locations = tuple(f"location {i + 1}" for i in range(max(cohort.targets, 1)))
+        game = msgspec.structs.replace(
+            base, variant="pilot", toys=cohort.toys, locations=locations, poses={}
+        )
+    else:
+        game = msgspec.structs.replace(
+            base, variant="names", toys=cohort.toys, locations=(), poses={}
+        )
+    return playable(msgspec.structs.replace(game, exclude_learned_rule=rule))
+
+
+def fit_cohort(
+    cohort: CohortFigures,
+    game: GameSettings,
+    profile: str,
+    params: LearnerParams,
+    teacher: Teacher | TeacherModel,
+    studies: int,
+    seed: int | None,
+) -> tuple[str, Fit]:
+    """The cohort's figures among `studies` simulated studies of its size; with their label."""
+    simulated = simulate_studies(studies, cohort.sessions, game, params, teacher, seed)
+    label = (
+        f"{cohort.label}: {cohort.sessions} sessions vs {profile}, {game.variant}, "
+        f"exclude_learned {game.exclude_learned_rule}"
+    )
+    return label, fit(cohort.label, dict(cohort.figures), simulated, cohort.sessions)
+
+
+def fit_paper(
+    profile: str,
+    params: LearnerParams,
+    rule: str,
+    teacher: Teacher | TeacherModel | None,
+    studies: int,
+    seed: int | None,
+) -> tuple[str, Fit]:
+    """The paper's pilot among studies of 16 groups (its children: PILOT_TEACHER by default)."""
+    game = pilot_game(exclude_learned_rule=rule)
+    chosen = PILOT_TEACHER if teacher is None else teacher
+    simulated = simulate_studies(studies, PAPER_GROUPS, game, params, chosen, seed)
+    label = f"the paper's pilot vs {profile}, exclude_learned {rule}"
+    return label, fit("paper", PAPER, simulated, PAPER_GROUPS)

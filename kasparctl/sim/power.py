@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from kasparctl.config import GameSettings
 from kasparctl.learning.learner import LearnerParams
+from kasparctl.sim.simulate import OptionError
 from kasparctl.sim.studies import concatenate, group_values, simulate_groups
 from kasparctl.sim.teacher import Teacher, TeacherModel
 
@@ -35,7 +36,7 @@ DEFAULT_STUDIES = 1000
 MAX_SIMULATED_GROUPS = 5_000_000
 
 
-class PowerError(ValueError):
+class PowerError(OptionError):
     """A design that cannot be simulated; the message names the option."""
 
 

@@ -19,10 +19,11 @@ groups run.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
+from hal.errors import KasparError
 from kasparctl.config import GameSettings
 from kasparctl.game.problem import TargetProgress
 from kasparctl.game.recovery import all_rejected, rejected_after, to_reopen
@@ -41,8 +42,15 @@ from kasparctl.sim.teacher import Teacher, TeacherModel
 PILOT_LOCATIONS = ("location 1", "location 2", "location 3")
 
 
-class SimulationError(ValueError):
+class SimulationError(KasparError, ValueError):
     """Game settings the simulator cannot play."""
+
+
+class OptionError(SimulationError):
+    """A value given for an option (its name begins the message) the simulation refuses.
+
+    The command line reports it as a usage error (exit 2).
+    """
 
 
 def pilot_game(**changes: object) -> GameSettings:
@@ -258,14 +266,13 @@ def simulate_study(
     params: LearnerParams,
     teacher: Teacher | TeacherModel,
     seed: int | None,
-    on_group: Callable[[int], None] | None = None,
     *,
     recover: bool = False,
 ) -> list[ProblemRecord]:
-    """`groups` groups playing `game`; `on_group(g)` after each, for a progress bar."""
+    """`groups` groups playing `game`, every problem of each."""
     return [
         record
-        for records in iter_groups(groups, game, params, teacher, seed, on_group, recover=recover)
+        for records in iter_groups(groups, game, params, teacher, seed, recover=recover)
         for record in records
     ]
 
@@ -276,7 +283,6 @@ def iter_groups(
     params: LearnerParams,
     teacher: Teacher | TeacherModel,
     seed: int | None,
-    on_group: Callable[[int], None] | None = None,
     *,
     recover: bool = False,
 ) -> Iterator[list[ProblemRecord]]:
@@ -292,8 +298,6 @@ def iter_groups(
             group = start + offset
             rng = np.random.default_rng(stream)
             yield simulate_group(game, params, teacher, rng, group, recover=recover)
-            if on_group is not None:
-                on_group(group)
 
 
 def summarise_study(
@@ -302,14 +306,18 @@ def summarise_study(
     params: LearnerParams,
     teacher: Teacher | TeacherModel,
     seed: int | None,
-    on_group: Callable[[int], None] | None = None,
     *,
     recover: bool = False,
 ) -> StudyStats:
     """The statistics of simulate_study, accumulated group by group in constant memory."""
+    return summarise_groups(iter_groups(groups, game, params, teacher, seed, recover=recover))
+
+
+def summarise_groups(groups: Iterable[list[ProblemRecord]]) -> StudyStats:
+    """The statistics of each group's problems (iter_groups), held a batch at a time."""
     accumulator = StatsAccumulator()
     batch: list[ProblemRecord] = []
-    for records in iter_groups(groups, game, params, teacher, seed, on_group, recover=recover):
+    for records in groups:
         batch.extend(records)
         if len(batch) >= 4096:
             accumulator.add(batch)

@@ -20,8 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hal.errors import KasparError
 
-class TeacherError(ValueError):
+
+class TeacherError(KasparError, ValueError):
     """A teacher probability outside [0, 1]; `key` names it."""
 
     def __init__(self, message: str, key: str) -> None:

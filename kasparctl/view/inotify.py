@@ -17,6 +17,8 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 
+from hal.errors import KasparError
+
 # <sys/inotify.h>
 IN_MODIFY = 0x00000002
 IN_ATTRIB = 0x00000004
@@ -39,7 +41,7 @@ _EVENT = struct.Struct("iIII")  # wd, mask, cookie, len; then len bytes of name
 _READ_SIZE = 64 * 1024
 
 
-class InotifyError(OSError):
+class InotifyError(KasparError, OSError):
     """inotify is not available, or a watch could not be added; names the path."""
 
 

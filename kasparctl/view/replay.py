@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from hal.errors import KasparError
 from kasparctl.game.jsonl import read_records
 from kasparctl.game.records import AnyRecord
 from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
@@ -36,7 +37,7 @@ RESTART_GAP_S = 1.0
 MIN_SPEED, MAX_SPEED = 1 / 16, 1024.0
 
 
-class ReplayError(Exception):
+class ReplayError(KasparError):
     """A session to replay that cannot be found or read; names what was looked for."""
 
 

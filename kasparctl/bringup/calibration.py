@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hal.servos.settings import JointSettings
-from kasparctl.commands.toml_patch import TomlValue, set_joint_keys
+from kasparctl.bringup.toml_patch import TomlValue, set_joint_keys
 
 MIN_SPAN_DEG = 5.0  # a joint moved less than this was not demonstrated
 FIRST_MOVE_DEG = 3.0  # the first excursion this far from the start gives the direction

@@ -17,6 +17,8 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from hal.errors import KasparError
+
 TomlValue = float | int | tuple[float, float]
 
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\[\]]+?)\s*(\]\]?)\s*(#.*)?$")
@@ -28,7 +30,7 @@ _KEY = re.compile(
 BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
 
 
-class TomlPatchError(Exception):
+class TomlPatchError(KasparError):
     """An edit that cannot be made surgically; the message names the table and key."""
 
 

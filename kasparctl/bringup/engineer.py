@@ -1,4 +1,4 @@
-"""What `servos calibrate` and `pose record/play` share: the servos, the engineer, the end.
+"""What bring-up shares (calibrate, poses, behaviours): the servos, the engineer, the end.
 
 The servos are the configured backend's (the real buses or the simulated
 servos). Only the chosen joints go limp; every other joint holds where it is
@@ -25,7 +25,7 @@ import msgspec
 import structlog
 
 from hal.clock import Clock
-from hal.errors import UnsafeCommand
+from hal.errors import KasparError, UnsafeCommand
 from hal.keyfob.api import KeyfobInput
 from hal.keyfob.gestures import ANSWERS_ONLY, GREEN, RED
 from hal.servos.joints import Joints
@@ -36,7 +36,7 @@ from kasparctl.config import Config
 
 log = structlog.get_logger("kasparctl.bringup")
 
-class BringUpError(Exception):
+class BringUpError(KasparError):
     """A bring-up command that cannot go on; the message says why and what to do."""
 
 
