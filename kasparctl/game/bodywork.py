@@ -40,6 +40,8 @@ HESITATE_AT = 0.6
 HESITATE_MAX_S = 0.5
 # Up to this strength Kaspar is sure: a quick, direct point and a nod as it asks.
 SURE_UP_TO = 0.25
+# How a point's goals are named in the joints layer's record (`demo --motion`).
+POINT_SOURCE = "point"
 
 # The behaviours the game asks for (the body's files name them).
 THINKING = "thinking"
@@ -96,9 +98,13 @@ def point_style(strength: float | None) -> PointStyle:
 
 
 async def point(servos: ServoApi, pose: dict[str, float], style: PointStyle) -> None:
-    """Move to `pose` as `style` says: straight there, or stopping part of the way first."""
+    """Move to `pose` as `style` says: straight there, or stopping part of the way first.
+
+    Each move claims only the pointing joints (ServoApi's arbitration): the body's mouth,
+    eyes and eyelids go on meanwhile. Its goals are the source POINT_SOURCE.
+    """
     if style.pause_at is None:
-        await servos.move(pose, duration=style.duration_s)
+        await servos.move(pose, duration=style.duration_s, source=POINT_SOURCE)
         return
     before = await servos.read_positions()
     share = style.pause_at
@@ -106,9 +112,9 @@ async def point(servos: ServoApi, pose: dict[str, float], style: PointStyle) -> 
         joint: before[joint] + share * (degrees - before[joint]) if joint in before else degrees
         for joint, degrees in pose.items()
     }
-    await servos.move(part, duration=style.duration_s * share)
+    await servos.move(part, duration=style.duration_s * share, source=POINT_SOURCE)
     await asyncio.sleep(style.pause_s)
-    await servos.move(pose, duration=style.duration_s * (1.0 - share))
+    await servos.move(pose, duration=style.duration_s * (1.0 - share), source=POINT_SOURCE)
 
 
 class BodyWork:
