@@ -271,6 +271,18 @@ def test_without_a_body_the_happy_and_sad_poses_are_the_face(tmp_path: Path) -> 
 # -- cancelled at once ---------------------------------------------------------------
 
 
+async def test_after_a_cancel_the_next_set_alive_reaches_the_body_again() -> None:
+    body = RecordingBody()
+    told: list[dict[str, Any]] = []
+    work = bodywork.BodyWork(body, lambda: None, told.append)
+    work.set_alive(True)
+    work.set_alive(True)  # asked twice: the body hears it once
+    work.cancel()  # a researcher's command: the body is still until asked again
+    work.set_alive(True)
+    assert [call.args for call in body.named("set_alive")] == [(True,), (True,)]
+    assert [info["alive"] for info in told if info["kind"] == "alive"] == [True]  # no news
+
+
 def test_a_pause_cancels_the_thinking_at_once(tmp_path: Path) -> None:
     async def pause_while_thinking(rig: DemoRig, body: RecordingBody) -> None:
         await on_event(rig, "body", lambda i: i.get("behaviour") == "thinking")

@@ -171,10 +171,15 @@ class LiveBody:
         self._alarm.close()
 
     def set_alive(self, alive: bool) -> None:
-        """Allow or forbid blinks, idle movements and gaze (they end at once when forbidden)."""
+        """Allow or forbid blinks, idle movements and gaze shifts.
+
+        Forbidden, blinks and idle movements end at once and no gaze is taken; the gaze
+        asked last still turns the head there and holds it (the game looks at the bag,
+        then keeps still while the arm points: the move claims only the arm).
+        """
         self._alive = alive
         if not alive:
-            self._blink = self._idle = self._gaze = None
+            self._blink = self._idle = None
             self._next_blink = self._next_idle = None
         else:
             self._poke()
@@ -313,9 +318,9 @@ class LiveBody:
         out: dict[str, float] = {}
         layers = self.layers
         layers.clear()
+        self._gaze_layer(now, held, out)
         if self._alive:
             self._schedule_life(now)
-            self._gaze_layer(now, held, out)
             if self._idle is not None:
                 self._idle = self._additive(self._idle, now, home, out)
             if self._blink is not None:

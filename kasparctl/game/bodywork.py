@@ -129,6 +129,8 @@ class BodyWork:
         self._plan = plan
         self._tell = tell
         self._alive: bool | None = None
+        # A cancel stilled the body: the next set_alive reaches it whatever it says.
+        self._stilled = False
 
     @property
     def fallback(self) -> bool:
@@ -152,11 +154,13 @@ class BodyWork:
     def set_alive(self, alive: bool) -> None:
         """Allow or forbid blinks, idle movements and gaze (never while the plan says no)."""
         wanted = alive and self.lively
-        if wanted == self._alive:
+        if wanted == self._alive and not self._stilled:
             return
-        self._alive = wanted
+        self._stilled = False
         self.body.set_alive(wanted)
-        self._tell({"kind": "alive", "alive": wanted})
+        if wanted != self._alive:
+            self._alive = wanted
+            self._tell({"kind": "alive", "alive": wanted})
 
     def look_at(self, kind: GazeKind, index: int = 0, name: str = "") -> None:
         """Turn to `kind` (its `index`, called `name` in the transcript), where gaze is on."""
@@ -171,5 +175,10 @@ class BodyWork:
         await self.body.perform(behaviour, strength)
 
     def cancel(self) -> None:
-        """End every behaviour at once (a pause, a fault, a stop)."""
+        """End every behaviour at once (a pause, a fault, a stop).
+
+        A cancelled body is still until asked again (kasparctl.body.api.Body.cancel): the
+        next set_alive reaches it, whatever was asked before the cancel.
+        """
         self.body.cancel()
+        self._stilled = True
