@@ -287,6 +287,26 @@ async def test_a_joint_the_robot_lacks_is_skipped_with_one_note():
     await body.close()
 
 
+async def test_a_gaze_asked_before_life_is_forbidden_turns_the_head_there_and_holds_it():
+    # The game's point: look at the bag, then no life while the arm moves.
+    clock = FakeClock()
+    servos = await powered(clock)
+    body = make_live(servos, clock, blink_interval_s=(0.1, 0.1), idle_interval_s=(0.1, 0.1))
+    body.set_alive(True)
+    body.look_at(Gaze(GazeKind.BAG, 0))
+    body.set_alive(False)
+    await run_ticks(body, clock, 1.0)
+    bag = dict(CONFIG.body.gaze.bags[0])
+    held = servos.commanded()
+    assert held["head_yaw"] == pytest.approx(bag["head_yaw"], abs=0.1)
+    assert held["head_pitch"] == pytest.approx(bag["head_pitch"], abs=0.1)
+    assert held["left_eyelid"] == 0.0  # no blink, no idle movement
+    body.look_at(Gaze(GazeKind.CHILD, 0))  # no new gaze while life is off
+    await run_ticks(body, clock, 1.0)
+    assert servos.commanded()["head_yaw"] == pytest.approx(bag["head_yaw"], abs=0.1)
+    await body.close()
+
+
 # --- properties -------------------------------------------------------------------------
 
 joint_names = st.sampled_from(sorted(JOINTS))

@@ -90,7 +90,7 @@ class RecordingServos:
     async def read_positions(self, group: str | None = None) -> dict[str, float]:
         return dict(self.where)
 
-    async def move(self, pose: dict[str, float], duration: float) -> None:
+    async def move(self, pose: dict[str, float], duration: float, source: str = "move") -> None:
         self.moves.append((dict(pose), duration))
         self.where.update(pose)
 
@@ -239,9 +239,9 @@ def test_without_a_body_the_happy_and_sad_poses_are_the_face(tmp_path: Path) -> 
     async def watch(rig: DemoRig, body: RecordingBody) -> None:
         original = rig.servos.move
 
-        async def move(pose: dict[str, float], duration: float) -> None:
+        async def move(pose: dict[str, float], duration: float, **how: Any) -> None:
             moved.append(dict(pose))
-            await original(pose, duration)
+            await original(pose, duration, **how)
 
         rig.servos.move = move  # type: ignore[method-assign]
 
@@ -257,9 +257,9 @@ def test_without_a_body_the_happy_and_sad_poses_are_the_face(tmp_path: Path) -> 
         rig = build(config_for("names"), options, body=StillBody())
         original = rig.servos.move
 
-        async def move(pose: dict[str, float], duration: float) -> None:
+        async def move(pose: dict[str, float], duration: float, **how: Any) -> None:
             still_moves.append(dict(pose))
-            await original(pose, duration)
+            await original(pose, duration, **how)
 
         rig.servos.move = move  # type: ignore[method-assign]
         await rig.run()
@@ -269,6 +269,18 @@ def test_without_a_body_the_happy_and_sad_poses_are_the_face(tmp_path: Path) -> 
 
 
 # -- cancelled at once ---------------------------------------------------------------
+
+
+async def test_after_a_cancel_the_next_set_alive_reaches_the_body_again() -> None:
+    body = RecordingBody()
+    told: list[dict[str, Any]] = []
+    work = bodywork.BodyWork(body, lambda: None, told.append)
+    work.set_alive(True)
+    work.set_alive(True)  # asked twice: the body hears it once
+    work.cancel()  # a researcher's command: the body is still until asked again
+    work.set_alive(True)
+    assert [call.args for call in body.named("set_alive")] == [(True,), (True,)]
+    assert [info["alive"] for info in told if info["kind"] == "alive"] == [True]  # no news
 
 
 def test_a_pause_cancels_the_thinking_at_once(tmp_path: Path) -> None:

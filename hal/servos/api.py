@@ -3,6 +3,11 @@
 The game speaks in named joints, groups and degrees; it never sees a bus, an
 id or a raw unit. Both the real joints (hal.servos.joints.Joints) and the simulated
 ones (hal.servos.sim.SimServos) implement ServoApi, with the same safety rules.
+
+Two paths move a joint, and ServoApi arbitrates them joint by joint: `move` plays a
+whole profile and claims the joints it moves until it ends; `stream` sends one control
+step and moves only joints nobody has claimed (the body's loop: gaze, blinks, the
+mouth). So the mouth follows a line while the arm points.
 """
 
 from __future__ import annotations
@@ -11,6 +16,8 @@ import enum
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
+
+from hal.clock import Clock
 
 
 class FaultKind(enum.Enum):
@@ -68,6 +75,25 @@ class JointStatus:
 
 Pose = Mapping[str, float]  # joint name -> degrees
 
+# Who sent a goal, when nobody says: a move() of the game, a stream() step of the body.
+MOVE = "move"
+STREAM = "stream"
+
+
+@dataclass(frozen=True, slots=True)
+class Goal:
+    """One goal the joints layer wrote to a joint: when, where to, and who asked.
+
+    `source` names the path: a move's (MOVE, or what its caller called it: "point",
+    "rest"), a streamed step's (STREAM, or the body's layer: "mouth", "blink", ...),
+    "torque_on" (the hold written before torque goes on), "into_range".
+    """
+
+    time: float  # Clock.now() when it was written
+    joint: str
+    degrees: float
+    source: str
+
 
 @runtime_checkable
 class ServoApi(Protocol):
@@ -77,7 +103,20 @@ class ServoApi(Protocol):
     joint's range are clamped (and the clamp is logged), no joint moves faster
     than its limit whatever `duration` says, turning torque on never makes a
     joint jump, and while a fault is latched motion is refused.
+
+    Arbitration is per joint. A move claims the joints of its pose for as long as it
+    runs; a second move sharing a joint with a move running or waiting waits for it
+    (moves sharing joints start in the order they were asked), and moves with no joint
+    in common run side by side. A stream step sends goals only to joints no move, no
+    set_compliant and no rest holds: those of a claimed joint are dropped (the claim
+    owns it), the others go out at once. set_compliant and rest claim what they touch.
+    A cancelled move lets its joints go at once, where they are.
     """
+
+    @property
+    def clock(self) -> Clock:
+        """The clock that times every move and stamps every goal."""
+        ...
 
     @property
     def joints(self) -> tuple[str, ...]:
@@ -111,17 +150,42 @@ class ServoApi(Protocol):
         ...
 
     async def move(
-        self, pose: Pose, duration: float | None = None, speed: float | None = None
+        self,
+        pose: Pose,
+        duration: float | None = None,
+        speed: float | None = None,
+        *,
+        source: str = MOVE,
     ) -> None:
         """Move the joints in `pose` together, arriving after `duration` seconds.
 
         Without a duration, each joint goes at `speed` deg/s, or at its own limit.
-        Returns when the motion has been commanded to its end. Raises
+        The joints are claimed from the start to the end (see the class); `source`
+        names the move in every Goal it writes. Returns when the motion has been
+        commanded to its end. Raises
         ServoFaultError while a fault is latched (or one is latched during the
         move), UnsafeCommand for a joint whose torque has not been turned on by
         set_compliant(group, False) and for a NaN target or a negative, infinite
         duration or speed, and UnknownJoint (a HalError that is also a KeyError)
         naming every unknown joint; nothing moves when it raises before the start.
+        """
+        ...
+
+    def commanded(self) -> dict[str, float]:
+        """The last goal of every joint whose torque is on (where it is held), in degrees."""
+        ...
+
+    async def stream(
+        self, pose: Pose, period: float, sources: Mapping[str, str] | None = None
+    ) -> dict[str, float]:
+        """One control step toward `pose`, for a loop that sends a goal every `period` s.
+
+        Each goal is clamped to its joint's range and moves from the joint's last goal
+        by at most its speed limit times the time since that goal (at most `period`).
+        Joints claimed by a move, set_compliant or rest, and limp joints, are left alone.
+        `sources` names the layer of each joint's goal (STREAM when not named). Returns
+        the goals sent. Raises UnknownJoint, UnsafeCommand (NaN target, bad period) and
+        ServoFaultError while a fault is latched.
         """
         ...
 
@@ -157,6 +221,14 @@ class ServoApi(Protocol):
         Joints freed by the safe action stay limp: set_compliant(group, False)
         turns them back on, from where they are.
         """
+        ...
+
+    def on_goals(self, listener: Callable[[Goal], None]) -> None:
+        """Call `listener` with every goal written, by any path, once its packet is sent."""
+        ...
+
+    def off_goals(self, listener: Callable[[Goal], None]) -> None:
+        """Stop calling a listener given to on_goals (unknown listeners are ignored)."""
         ...
 
 

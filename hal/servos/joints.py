@@ -11,6 +11,11 @@ Safety rules, enforced here whatever a pose file or a caller says:
   configured safe action (hold or torque_off) is applied to the rest;
 - while a fault is latched every motion is refused until clear_faults();
 - the same error repeating is logged once, then once with its count when it ends.
+
+One arbiter of motion (hal.servos.claims): a move claims only the joints it moves, for
+as long as it runs; stream steps go on for every other joint (the mouth while the arm
+points) and are dropped for the claimed ones; set_compliant and rest claim the joints
+they touch. Every goal, by any path, is told to the goal listeners (on_goals).
 """
 
 from __future__ import annotations
@@ -34,7 +39,18 @@ from hal.errors import (
     UnknownJoint,
     UnsafeCommand,
 )
-from hal.servos.api import Fault, FaultKind, Health, JointStatus, Pose, ServoDriver
+from hal.servos.api import (
+    MOVE,
+    STREAM,
+    Fault,
+    FaultKind,
+    Goal,
+    Health,
+    JointStatus,
+    Pose,
+    ServoDriver,
+)
+from hal.servos.claims import JointClaims
 from hal.servos.settings import JointSettings, ServoSettings
 
 log = structlog.get_logger("hal.servos.joints")
@@ -48,6 +64,10 @@ PROFILE_PEAK = 1.5
 # A servo this close to max_temperature_c is logged (once) before the fault latches.
 TEMPERATURE_WARNING_MARGIN_C = 5.0
 NEAR_TEMPERATURE_LIMIT = "NEAR_TEMPERATURE_LIMIT"
+# The sources of the goals the joints layer writes on its own account.
+TORQUE_ON = "torque_on"  # the hold written just before torque goes on
+INTO_RANGE = "into_range"  # a joint found a little outside its range, brought in
+REST = "rest"
 # Readings outside these are no servo's: `servos read` and `check` name them.
 PLAUSIBLE_TEMPERATURE_C = (-20.0, 120.0)
 PLAUSIBLE_VOLTAGE_V = (4.0, 20.0)
@@ -124,7 +144,8 @@ class Joints:
         self._groups = settings.groups
         self._faults: list[Fault] = []
         self._fault_listeners: list[Callable[[Fault], None]] = []
-        self._motion = asyncio.Lock()
+        self._claims = JointClaims()
+        self._goal_listeners: list[Callable[[Goal], None]] = []
         self._repeats = RepeatFilter()
         self._poll_task: asyncio.Task[None] | None = None
         self._last_status: dict[str, JointStatus] = {}
@@ -164,6 +185,20 @@ class Joints:
         """Stop calling a listener given to on_fault; an unknown one is ignored."""
         with contextlib.suppress(ValueError):
             self._fault_listeners.remove(listener)
+
+    def on_goals(self, listener: Callable[[Goal], None]) -> None:
+        """Call `listener` with every goal written, by any path, once its packet is sent
+        (`kasparctl demo --motion` writes them down)."""
+        self._goal_listeners.append(listener)
+
+    def off_goals(self, listener: Callable[[Goal], None]) -> None:
+        """Stop calling a listener given to on_goals; an unknown one is ignored."""
+        with contextlib.suppress(ValueError):
+            self._goal_listeners.remove(listener)
+
+    def claimed(self) -> frozenset[str]:
+        """The joints a move, set_compliant or rest holds now (stream steps leave them be)."""
+        return self._claims.held()
 
     async def start(self, poll: bool = True, read: bool = True) -> None:
         """Open the buses; with `read`, learn where every joint is; with `poll`, watch health.
@@ -217,12 +252,19 @@ class Joints:
         return {j.name: j.present for j in selected if j.present is not None}
 
     async def move(
-        self, pose: Pose, duration: float | None = None, speed: float | None = None
+        self,
+        pose: Pose,
+        duration: float | None = None,
+        speed: float | None = None,
+        *,
+        source: str = MOVE,
     ) -> None:
         """Move the joints in `pose` together, within their ranges and speed limits.
 
-        See ServoApi.move: clamped targets are logged, and the profile takes at least
-        `duration` seconds. Raises UnknownJoint, UnsafeCommand or ServoFaultError.
+        See ServoApi.move: the joints of `pose` are claimed (after any earlier move,
+        set_compliant or rest holding one of them), clamped targets are logged, and the
+        profile takes at least `duration` seconds; its goals are told as `source`.
+        Raises UnknownJoint, UnsafeCommand or ServoFaultError.
         """
         unknown = [name for name in pose if name not in self._joints]
         if unknown:
@@ -231,7 +273,7 @@ class Joints:
             raise UnsafeCommand(f"duration must be a finite number >= 0, found {duration}")
         if speed is not None and not (speed > 0 and math.isfinite(speed)):
             raise UnsafeCommand(f"speed must be a finite number > 0, found {speed}")
-        async with self._motion:
+        async with self._claims.claim(pose, source):
             self._refuse_if_faulted()
             joints = [self._joints[name] for name in pose]
             # Torque goes on only through set_compliant(group, False), which sets the goal to
@@ -242,7 +284,7 @@ class Joints:
                     f"torque is off or not yet turned on by set_compliant for: {', '.join(limp)}"
                 )
             targets = {j.name: self._clamped(j, pose[j.name]) for j in joints}
-            await self._run_profile(joints, targets, duration, speed)
+            await self._run_profile(joints, targets, duration, speed, source)
 
     def commanded(self) -> dict[str, float]:
         """The last goal of every joint whose torque is on (where it is being held), in degrees."""
@@ -251,14 +293,19 @@ class Joints:
             if j.torque is True and j.commanded is not None
         }
 
-    async def stream(self, pose: Pose, period: float) -> dict[str, float]:
+    async def stream(
+        self, pose: Pose, period: float, sources: Mapping[str, str] | None = None
+    ) -> dict[str, float]:
         """One control step toward `pose`, for a loop that sends a goal every `period` seconds.
 
         Each joint's goal is clamped to its range (logged), and moves from its last
         goal by at most its speed limit times the time since that goal was written
-        (at most `period`: a late step does not catch up). One packet per bus, no
-        waiting beyond it. Joints whose torque is off (teaching) are left alone, and
-        nothing is sent while a move() holds the joints. Returns the goals sent.
+        (at most `period`: a late step does not catch up; after a move, from the
+        move's last goal). One packet per bus, no waiting beyond it. Joints whose
+        torque is off (teaching) are left alone, and so are the joints a move,
+        set_compliant or rest holds (their goals are dropped: the claim owns them);
+        the others go out at once. `sources` names each joint's layer in the goals
+        told to the listeners (STREAM when unnamed). Returns the goals sent.
         Raises UnknownJoint, UnsafeCommand (NaN target, bad period) and
         ServoFaultError while a fault is latched (or one is latched by this write).
         """
@@ -267,21 +314,21 @@ class Joints:
             raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
         if not (period > 0 and math.isfinite(period)):
             raise UnsafeCommand(f"period must be a finite number > 0, found {period}")
-        if self._motion.locked():
-            return {}  # a move owns the joints until it ends; the next step starts from there
         self._refuse_if_faulted()
         now = self.clock.now()
         sent: dict[str, float] = {}
-        joints = [
-            self._joints[name] for name in pose
-            if self._joints[name].torque is True and self._joints[name].commanded is not None
-        ]
-        for driver, members in self._by_driver(joints).items():
+        for driver, members in self._by_driver(pose).items():
+            # Asked again for each bus: a claim, a torque change or a fault may have come
+            # while the last packet was on its way. A claimed joint's goals come from its
+            # claim alone, so two writers never interleave on one joint.
+            self._refuse_if_faulted()
+            claimed = self._claims.held()
             goals = {}
             for joint in members:
-                target = self._clamped(joint, pose[joint.name])
                 start = joint.commanded
-                assert start is not None
+                if joint.name in claimed or joint.torque is not True or start is None:
+                    continue
+                target = self._clamped(joint, pose[joint.name])
                 elapsed = period if joint.sent_at is None else max(0.0, now - joint.sent_at)
                 reach = joint.settings.max_speed_dps * min(period, elapsed)
                 goal = max(start - reach, min(start + reach, target))
@@ -293,6 +340,12 @@ class Joints:
                 sent[joint.name] = goal
             if goals:
                 await self._guarded(members[0], driver.write_goals(goals, period))
+                self._tell(
+                    now,
+                    {j.name: sent[j.name] for j in members if j.servo_id in goals},
+                    sources,
+                    STREAM,
+                )
         return sent
 
     async def set_compliant(self, group: str, compliant: bool) -> None:
@@ -302,7 +355,7 @@ class Joints:
         while a fault is latched and UnsafeCommand for a joint outside its range.
         """
         joints = [self._joints[name] for name in self._select(group)]
-        async with self._motion:
+        async with self._claims.claim([j.name for j in joints], "set_compliant"):
             if compliant:
                 await self._torque(joints, False)
                 return
@@ -318,11 +371,11 @@ class Joints:
         """
         unknown = [j for j in self._joints.values() if j.torque is None]
         if unknown:
-            async with self._motion:
+            async with self._claims.claim([j.name for j in unknown], REST):
                 self._refuse_if_faulted()
                 await self._power_on(unknown, strict=False)
         pose = {name: j.settings.rest_deg for name, j in self._joints.items() if j.torque is True}
-        await self.move(pose, duration)
+        await self.move(pose, duration, source=REST)
 
     async def _power_on(self, joints: list[_Joint], strict: bool) -> None:
         """Goal := present position, then torque on; never for a joint outside its range.
@@ -356,6 +409,8 @@ class Joints:
                 raw = s.servo.to_raw(joint.commanded, s.direction, s.offset_deg)
                 goals[joint.servo_id] = (raw, s.max_speed_dps)
             await self._guarded(members[0], driver.write_goals(goals, self.step))
+            self._tell(self.clock.now(), {j.name: j.present for j in members
+                                          if j.present is not None}, None, TORQUE_ON)
         await self._torque(joints, True)
         for joint in joints:
             joint.commanded = joint.present
@@ -364,7 +419,7 @@ class Joints:
             # Into range at each joint's own speed limit, not in one control step.
             log.info("joints brought into their safe range", joints=self._describe_outside(edging))
             targets = {j.name: j.clamp(j.present) for j in edging}  # type: ignore[arg-type]
-            await self._run_profile(edging, targets, None, None)
+            await self._run_profile(edging, targets, None, None, INTO_RANGE)
 
     @staticmethod
     def _outside_by(joint: _Joint) -> float:
@@ -621,6 +676,7 @@ class Joints:
         targets: dict[str, float],
         duration: float | None,
         speed: float | None,
+        source: str,
     ) -> None:
         starts = {}
         for joint in joints:
@@ -641,6 +697,7 @@ class Joints:
             fraction = smoothstep(k / steps)
             for driver, members in by_driver.items():
                 goals = {}
+                written = self.clock.now()
                 for joint in members:
                     start, end = starts[joint.name], targets[joint.name]
                     # Clamped to the range, widened only to include a start found outside it
@@ -650,11 +707,29 @@ class Joints:
                     joint.commanded = max(low, min(high, start + (end - start) * fraction))
                     goals[joint.servo_id] = (joint.to_raw_unclamped(joint.commanded),
                                              limits[joint.name])
-                    joint.sent_at = self.clock.now()
+                    joint.sent_at = written
                 await self._guarded(members[0], driver.write_goals(goals, self.step))
+                self._tell(written, {j.name: j.commanded for j in members
+                                     if j.commanded is not None}, None, source)
             # Absolute schedule: a late step is not followed by a catch-up burst.
             delay = begin + k * self.step - self.clock.now()
             await self.clock.sleep(max(0.0, delay) if k < steps else 0.0)
+
+    def _tell(
+        self,
+        time: float,
+        goals: Mapping[str, float],
+        sources: Mapping[str, str] | None,
+        default: str,
+    ) -> None:
+        """Each goal just written, to every goal listener."""
+        if not self._goal_listeners:
+            return
+        for joint, degrees in goals.items():
+            source = sources.get(joint, default) if sources is not None else default
+            goal = Goal(time, joint, degrees, source)
+            for listener in self._goal_listeners:
+                listener(goal)
 
     async def _guarded(self, joint: _Joint, operation: Awaitable[T]) -> T:
         try:

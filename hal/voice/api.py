@@ -1,13 +1,16 @@
-"""What the game sees of Kaspar's voice: say, cancel, close.
+"""What the game sees of Kaspar's voice: say, cancel, close; and what the mouth hears of it.
 
 The real voice (hal.voice.speaker.Voice) and the simulated one (hal.voice.sim.SimVoice)
 both satisfy VoiceOutput. Speech failures are not exceptions: a session must
 go on when the voice fails, so say() returns a Spoken record naming what
-happened, and the game records the ones that are not "finished".
+happened, and the game records the ones that are not "finished". Either voice can
+be listened to (`listen`): an EnvelopeListener (the body's mouth) is told the
+loudness of every line as it is played (hal.voice.envelope).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Protocol
@@ -45,6 +48,19 @@ class Spoken:
         return self.status is SpokenStatus.FINISHED
 
 
+class EnvelopeListener(Protocol):
+    """Told the levels of the audio as it is handed to the player; called on the event loop."""
+
+    def on_envelope(self, start: float, frame_s: float, levels: Sequence[float]) -> None:
+        """`levels` (RMS, 0 to 1 of full scale) of consecutive `frame_s` frames, the first
+        handed to the player at clock time `start`."""
+        ...
+
+    def on_end(self, cut: bool) -> None:
+        """No more audio for this line; `cut`: it was cancelled or failed, stop now."""
+        ...
+
+
 class VoiceOutput(Protocol):
     """Kaspar's voice as the game uses it; every method runs on the event loop."""
 
@@ -61,4 +77,15 @@ class VoiceOutput(Protocol):
 
     async def close(self) -> None:
         """Cancel, then release the engine; idempotent."""
+        ...
+
+    def listen(self, listener: EnvelopeListener | None) -> bool:
+        """Tell `listener` the levels of every line as it is played (None: nobody); False
+        when this voice's output cannot be listened to."""
+        ...
+
+    @property
+    def player(self) -> str | None:
+        """The player program the sound goes to (its latency delays what is heard); None
+        when nothing is played through one (WAV files, a simulated voice)."""
         ...

@@ -6,36 +6,84 @@ first of them starts to sound (without the player's own output latency, which
 the listener compensates). It is also told when a line ends, and whether it was
 cut. Works for every engine and for recorded clips, since it reads the samples
 themselves: a WAV file before it is played, or espeak-ng's stream as it passes
-through to the player.
+through to the player. A voice with no samples (the simulated one) gives the
+envelope a line's syllables would have (syllable_envelope).
 """
 
 from __future__ import annotations
 
 import math
+import re
 import struct
 import wave
 from array import array
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Protocol
 
 from hal.clock import Clock
+from hal.voice.api import EnvelopeListener
+
+__all__ = ["FRAME_S", "EnvelopeListener", "StreamMeter", "frame_seconds", "rms_levels",
+           "syllable_envelope", "syllables", "wav_levels"]
 
 # 10 ms frames: fine enough for a mouth at 50 Hz, coarse enough to be cheap.
 FRAME_S = 0.01
 
 
-class EnvelopeListener(Protocol):
-    """Told the levels of the audio as it is handed to the player; called on the event loop."""
+# A syllable swells to this level (RMS of full scale) and back; the first of a word is
+# stressed. Louder than the mouth's default full level (0.2): the mouth opens fully.
+STRESSED_LEVEL = 0.24
+UNSTRESSED_LEVEL = 0.16
+# Silences, in syllables' lengths: between words, and at a comma or a full stop.
+WORD_GAP = 0.25
+COMMA_PAUSE = 1.0
+STOP_PAUSE = 1.5
+_VOWEL_GROUP = re.compile(r"[aeiouyàáâãäåæèéêëìíîïòóôõöøœùúûüý]+", re.IGNORECASE)
+# Two vowels side by side that are mostly said apart (li-on, vi-de-o, u-su-al), but not
+# in -tion, -cial or after a q or g (ques-tion, so-cial, lan-guage).
+_HIATUS = re.compile(r"(?<![tscxg])i(?=[aou])|e(?=o)|(?<![qg])u(?=[ao])")
+_TOKENS = re.compile(r"[^\W_]+(?:['\u2019][^\W_]+)*|[,;:]|[.!?]+")
 
-    def on_envelope(self, start: float, frame_s: float, levels: Sequence[float]) -> None:
-        """`levels` (RMS, 0 to 1 of full scale) of consecutive `frame_s` frames, the first
-        handed to the player at clock time `start`."""
-        ...
 
-    def on_end(self, cut: bool) -> None:
-        """No more audio for this line; `cut`: it was cancelled or failed, stop now."""
-        ...
+def syllables(word: str) -> int:
+    """Syllables of a word: its groups of vowels, a group with two vowels heard apart (li-on,
+    ra-di-o) counting two; a word of consonants or digits, one."""
+    word = word.lower()
+    return max(1, len(_VOWEL_GROUP.findall(word)) + len(_HIATUS.findall(word)))
+
+
+def syllable_envelope(text: str, seconds: float, frame_s: float = FRAME_S) -> list[float]:
+    """The levels of `frame_s` frames a voice saying `text` in `seconds` would give: each
+    syllable a swell (the first of each word louder), silence between words, longer at
+    a comma and a full stop. Nothing to say (no word, no time): no frames."""
+    # (length in syllables, peak level); a peak of 0 is silence.
+    pieces: list[tuple[float, float]] = []
+    for token in _TOKENS.findall(text):
+        if token[0] in ",;:":
+            pieces.append((COMMA_PAUSE, 0.0))
+        elif token[0] in ".!?":
+            pieces.append((STOP_PAUSE, 0.0))
+        else:
+            if pieces and pieces[-1][1] > 0.0:
+                pieces.append((WORD_GAP, 0.0))
+            count = syllables(token)
+            pieces += [(1.0, STRESSED_LEVEL)] + [(1.0, UNSTRESSED_LEVEL)] * (count - 1)
+    while pieces and pieces[-1][1] == 0.0:
+        pieces.pop()  # the line ends with its last syllable
+    total = sum(length for length, _ in pieces)
+    frames = round(seconds / frame_s)
+    if not total or frames <= 0:
+        return []
+    levels: list[float] = []
+    unit = frames / total  # frames per syllable
+    begin = 0.0
+    for length, peak in pieces:
+        end = begin + length * unit
+        count = round(end) - round(begin)
+        for index in range(count):
+            levels.append(peak * math.sin(math.pi * (index + 0.5) / count))
+        begin = end
+    return levels
 
 
 def frame_seconds(rate: int, frame_s: float = FRAME_S) -> float:

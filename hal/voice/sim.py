@@ -3,6 +3,13 @@
 Optionally it also speaks (or writes WAV files) through a real voice, e.g.
 hal.voice.speaker.Voice with engine "espeak-ng", so the demo can be heard.
 
+It can be listened to, as the real voice can: the mouth is told the envelope of each
+line, the real voice's own (its samples) when it has one and it can be listened to,
+else the envelope of the line's syllables, spread over its speaking time
+(hal.voice.envelope.syllable_envelope), so a simulated game shows lip sync too. While
+the real voice renders a line, simulated time stands still (hal.clock.thread_work), so
+in a game in simulated time the sound starts as the line does.
+
 Faults can be injected as the real voice has them: a player that fails at
 once (no sound card: every line FAILED with the player's error, the line
 being said cut), or one that hangs (every line TIMED_OUT after the voice's
@@ -16,8 +23,9 @@ import contextlib
 from collections.abc import Callable, Mapping
 from typing import TextIO
 
-from hal.clock import Clock
-from hal.voice.api import Spoken, SpokenStatus, VoiceOutput
+from hal.clock import Clock, thread_work
+from hal.voice.api import EnvelopeListener, Spoken, SpokenStatus, VoiceOutput
+from hal.voice.envelope import FRAME_S, syllable_envelope
 
 PAUSE_AFTER_LINE = 0.3
 
@@ -25,6 +33,11 @@ PAUSE_AFTER_LINE = 0.3
 def speaking_time(text: str, rate: int) -> float:
     """Seconds a line takes at `rate` words per minute, with a short pause after it."""
     return len(text.split()) * 60.0 / rate + PAUSE_AFTER_LINE
+
+
+def sounding_time(text: str, rate: int) -> float:
+    """Seconds of a line's speaking time that sound (without the pause after it)."""
+    return speaking_time(text, rate) - PAUSE_AFTER_LINE
 
 
 class SimVoice:
@@ -61,8 +74,23 @@ class SimVoice:
         self._failure: str | None = None
         self._hangs = False
         self.lines: list[Spoken] = []
+        self._listener: EnvelopeListener | None = None
+        # The real voice tells the listener its own envelope (the sound's samples).
+        self._heard_through_also = False
         # Called with each line's text as Kaspar starts to say it (a test waits on it).
         self.on_line: Callable[[str], None] | None = None
+
+    def listen(self, listener: EnvelopeListener | None) -> bool:
+        """Tell `listener` the envelope of every line as it starts (None: nobody): the real
+        voice's, when one is given and can be listened to, else the syllables'. Always True."""
+        self._listener = listener
+        self._heard_through_also = self._also is not None and self._also.listen(listener)
+        return True
+
+    @property
+    def player(self) -> str | None:
+        """The real voice's player, if it plays through one; None otherwise (no latency)."""
+        return self._also.player if self._also is not None else None
 
     def inject_fault(self, error: str | None, *, hang: bool = False) -> None:
         """From now on every line fails with `error` (the line being said ends at once);
@@ -115,15 +143,28 @@ class SimVoice:
         if hung:
             await self._clock.sleep(self._timeout)
             return
-        waits = [self._clock.sleep(speaking_time(text, self._rate))]
-        if self._also is not None:
-            waits.append(self._also_say(text, key))
-        await asyncio.gather(*waits)
+        listener = None if self._heard_through_also else self._listener
+        if listener is not None:
+            levels = syllable_envelope(text, sounding_time(text, self._rate))
+            listener.on_envelope(self._clock.now(), FRAME_S, levels)
+        cut = True
+        try:
+            waits = [self._clock.sleep(speaking_time(text, self._rate))]
+            if self._also is not None:
+                waits.append(self._also_say(text, key))
+            await asyncio.gather(*waits)
+            cut = False
+        finally:
+            if listener is not None:
+                listener.on_end(cut)
 
     async def _also_say(self, text: str, key: str | None) -> None:
         assert self._also is not None
         try:
-            await self._also.say(text, key)
+            # Simulated time stands still while the real voice renders (no effect on a
+            # real clock): the line sounds from its start, as it would on the robot.
+            with thread_work(asyncio.get_running_loop()):
+                await self._also.say(text, key)
         except asyncio.CancelledError:
             self._also.cancel()
             raise

@@ -18,8 +18,12 @@ not sent anything (the arm the children move while teaching stays limp and free)
 
 Every tick sends one `stream` step through the joints layer: its clamps, its speed
 limits (a jump between layers is slewed, never sent), its torque rules and
-latched faults. A fault, a pause or a stop calls cancel(): every layer ends at
-once and nothing more is sent until the game asks again.
+latched faults, and its arbitration: the joints a move of the game holds (the arm
+pointing, the listening pose) are left to the move, and every other joint streams
+on (the mouth says the line while the arm points). Each goal is named by the layer
+that won its joint (gaze, idle, blink, mouth, gesture:<behaviour>, home). A fault,
+a pause or a stop calls cancel(): every layer ends at once and nothing more is sent
+until the game asks again.
 """
 
 from __future__ import annotations
@@ -27,15 +31,15 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import random
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import structlog
 
 from hal.clock import Alarm, Clock
 from hal.errors import HalError
-from hal.servos.api import Fault, Pose
+from hal.servos.api import Fault, ServoApi
 from hal.servos.settings import ServoSettings
 from kasparctl.body.api import Gaze, GazeKind
 from kasparctl.body.behaviours import Behaviour, minimum_jerk
@@ -51,31 +55,13 @@ HOME_EPSILON_DEG = 0.05
 HOME_PULL = 0.2
 BLINK = "blink"
 IDLE = "idle"
-
-
-class StreamingServos(Protocol):
-    """What the body needs of the servos (hal.servos.joints.Joints gives it)."""
-
-    @property
-    def joints(self) -> tuple[str, ...]:
-        """Every configured joint."""
-        ...
-
-    def commanded(self) -> dict[str, float]:
-        """The last goal of every joint whose torque is on."""
-        ...
-
-    async def stream(self, pose: Pose, period: float) -> dict[str, float]:
-        """One control step toward `pose`, within every limit."""
-        ...
-
-    def on_fault(self, listener: Callable[[Fault], None]) -> None:
-        """Call `listener` with every newly latched fault."""
-        ...
-
-    def off_fault(self, listener: Callable[[Fault], None]) -> None:
-        """Stop calling `listener`."""
-        ...
+# The layers, as each goal's source names them (a gesture's adds the behaviour's name).
+GAZE_LAYER = "gaze"
+IDLE_LAYER = "idle"
+BLINK_LAYER = "blink"
+MOUTH_LAYER = "mouth"
+GESTURE_LAYER = "gesture"
+HOME_LAYER = "home"
 
 
 @dataclass(eq=False)
@@ -84,6 +70,7 @@ class _Playback:
 
     behaviour: Behaviour
     strength: float
+    layer: str
     done: asyncio.Future[None] | None = None
     started: float | None = None
     base: dict[str, float] = field(default_factory=dict)
@@ -107,7 +94,7 @@ class LiveBody:
 
     def __init__(
         self,
-        servos: StreamingServos,
+        servos: ServoApi,
         settings: BodySettings,
         servo_settings: ServoSettings,
         library: Mapping[str, Behaviour],
@@ -157,6 +144,8 @@ class LiveBody:
         self._home: dict[str, float] = {}
         # What the body itself last sent, to tell its own goals from the game's moves.
         self._sent: dict[str, float] = {}
+        # The layer that won each joint at the last compose (the goals' sources).
+        self.layers: dict[str, str] = {}
         # Set to a list to collect each tick's lateness in seconds (bench/bench_body_loop.py).
         self.lateness: list[float] | None = None
         # A latched fault ends every behaviour at once, loop running or not.
@@ -182,10 +171,15 @@ class LiveBody:
         self._alarm.close()
 
     def set_alive(self, alive: bool) -> None:
-        """Allow or forbid blinks, idle movements and gaze (they end at once when forbidden)."""
+        """Allow or forbid blinks, idle movements and gaze shifts.
+
+        Forbidden, blinks and idle movements end at once and no gaze is taken; the gaze
+        asked last still turns the head there and holds it (the game looks at the bag,
+        then keeps still while the arm points: the move claims only the arm).
+        """
         self._alive = alive
         if not alive:
-            self._blink = self._idle = self._gaze = None
+            self._blink = self._idle = None
             self._next_blink = self._next_idle = None
         else:
             self._poke()
@@ -221,7 +215,8 @@ class LiveBody:
                 self._note_once(behaviour.name, joint, "joint not on this robot: skipped")
         if self._gesture is not None:
             self._gesture.finish()
-        playback = _Playback(behaviour, strength, asyncio.get_running_loop().create_future())
+        playback = _Playback(behaviour, strength, f"{GESTURE_LAYER}:{behaviour.name}",
+                             asyncio.get_running_loop().create_future())
         self._gesture = playback
         self._poke()
         return playback
@@ -304,7 +299,7 @@ class LiveBody:
         if not pose:
             return {}
         try:
-            sent = await self._servos.stream(pose, self.period)
+            sent = await self._servos.stream(pose, self.period, dict(self.layers))
         except HalError as error:
             if not self._fault_seen:
                 log.warning("body paused: the servos refuse motion", error=str(error))
@@ -321,9 +316,11 @@ class LiveBody:
         self._learn_home(held)
         home = self._home
         out: dict[str, float] = {}
+        layers = self.layers
+        layers.clear()
+        self._gaze_layer(now, held, out)
         if self._alive:
             self._schedule_life(now)
-            self._gaze_layer(now, held, out)
             if self._idle is not None:
                 self._idle = self._additive(self._idle, now, home, out)
             if self._blink is not None:
@@ -333,6 +330,7 @@ class LiveBody:
             if opening is not None:
                 span = self._settings.mouth_open_deg
                 out[self._mouth_joint] = self._mouth_closed + opening * span
+                layers[self._mouth_joint] = MOUTH_LAYER
         if self._gesture is not None:
             self._gesture = self._relative(self._gesture, now, home, out)
         for joint, rest in home.items():
@@ -340,6 +338,7 @@ class LiveBody:
             now_at = held.get(joint)
             if now_at is not None and joint not in out and abs(now_at - rest) > HOME_EPSILON_DEG:
                 out[joint] = now_at + (rest - now_at) * HOME_PULL
+                layers[joint] = HOME_LAYER
         return {
             joint: self._within(joint, value) for joint, value in out.items() if joint in held
         }
@@ -386,11 +385,11 @@ class LiveBody:
         if now >= self._next_blink:
             self._next_blink = None
             if self._blink is None and BLINK in self._library:
-                self._blink = _Playback(self._library[BLINK], 1.0)
+                self._blink = _Playback(self._library[BLINK], 1.0, BLINK_LAYER)
         if now >= self._next_idle:
             self._next_idle = None
             if self._idle is None and IDLE in self._library and settings.idle_amplitude > 0:
-                self._idle = _Playback(self._library[IDLE], settings.idle_amplitude)
+                self._idle = _Playback(self._library[IDLE], settings.idle_amplitude, IDLE_LAYER)
 
     def _gaze_layer(self, now: float, held: Mapping[str, float], out: dict[str, float]) -> None:
         move = self._gaze
@@ -406,6 +405,7 @@ class LiveBody:
             start = move.start.get(joint)
             if start is not None:
                 out[joint] = start + (target - start) * fraction
+                self.layers[joint] = GAZE_LAYER
         move.settled = now - move.began >= GAZE_MOVE_S
         if move.settled:
             self._home.update({j: v for j, v in move.target.items() if j in move.start})
@@ -421,6 +421,7 @@ class LiveBody:
         for joint, offset in playback.behaviour.offsets(elapsed, playback.strength).items():
             if joint in playback.base:
                 out[joint] = out.get(joint, playback.base[joint]) + offset
+                self.layers[joint] = playback.layer
         if elapsed >= playback.behaviour.duration:
             playback.finish()
             return None
@@ -439,6 +440,7 @@ class LiveBody:
         for joint, offset in playback.behaviour.offsets(elapsed, playback.strength).items():
             if joint in playback.base:
                 out[joint] = playback.base[joint] + offset
+                self.layers[joint] = playback.layer
         if elapsed >= playback.behaviour.duration:
             playback.finish()
             return None

@@ -23,6 +23,7 @@ import os
 import re
 import sys
 from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
 from typing import Any, NoReturn, TypeVar
 
 from hal.errors import KasparError
@@ -251,6 +252,20 @@ def path(text: str) -> str:
     if not text or "\0" in text:
         _refuse("a path", text)
     return text
+
+
+def output_file(text: str) -> Path:
+    """A file to write: not a directory, in a folder that exists and may be written."""
+    path(text)
+    target = Path(text)
+    if target.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: is a directory, expected a file")
+    folder = target.resolve().parent
+    if not folder.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: no such directory: {folder}")
+    if not os.access(folder, os.W_OK):
+        raise argparse.ArgumentTypeError(f"{text}: {folder}: permission denied")
+    return target
 
 
 def add_sources(

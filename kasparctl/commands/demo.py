@@ -24,6 +24,7 @@ from kasparctl.commands.arguments import (
     UsageError,
     language,
     number,
+    output_file,
     path,
     seed,
     stdin_readable,
@@ -105,6 +106,10 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--json", action="store_true", help="end with one JSON line summarising the game"
     )
+    parser.add_argument("--motion", type=output_file, metavar="CSV", help="write every goal each "
+                        "joint received: time_s, joint, position_deg, source (session clock)")
+    parser.add_argument("--voice", choices=("espeak-ng", "pyttsx3"), help="also say every line "
+                        "with this engine, into WAV files (<state-dir>/voice, or voice.wav_dir)")
     parser.add_argument(
         "--view",
         action="store_true",
@@ -158,6 +163,8 @@ def run(arguments: argparse.Namespace) -> int:
         messiness=messiness,
         interactive=arguments.interactive,
         uncertainty=arguments.uncertainty,
+        motion=arguments.motion,
+        voice=arguments.voice,
         # A reader that goes away (`| head`) ends the demo, quietly (exit 0).
         out=cast(TextIO, Transcript(sys.stdout)),
     )

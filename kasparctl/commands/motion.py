@@ -2,13 +2,13 @@
 
 Shared by `say --motion` and `behaviour play --motion`. The simulated servos keep
 every goal packet (hal.servos.sim.SimDriver.writes); each goal is turned back into
-degrees and written as (time_s, joint, position_deg), time from a chosen origin.
+degrees and written as (time_s, joint, position_deg), time from a chosen origin: the
+first columns of `demo --motion`'s record (kasparctl.sim.recording).
 """
 
 from __future__ import annotations
 
 import asyncio
-import csv
 import random
 import tempfile
 import wave
@@ -27,6 +27,9 @@ from kasparctl.body.behaviours import load_library
 from kasparctl.body.engine import LiveBody
 from kasparctl.config import Config
 from kasparctl.sim import simtime
+from kasparctl.sim.recording import write_csv
+
+__all__ = ["powered_sim", "render", "say_with_motion", "trajectory", "wav_seconds", "write_csv"]
 
 # After the line's last sample, the body keeps running this long (the mouth closes).
 TAIL_S = 0.6
@@ -48,18 +51,6 @@ def trajectory(servos: SimServos, origin: float) -> Iterator[tuple[float, str, f
     }
     rows.sort(key=lambda row: (row[0], row[1]))
     return (row for row in rows if row[1] in moved)
-
-
-def write_csv(rows: Iterator[tuple[float, str, float]], path: Path) -> int:
-    """Write the rows with their header; the number of rows written."""
-    count = 0
-    with path.open("w", newline="", encoding="utf-8") as file:
-        writer = csv.writer(file)
-        writer.writerow(("time_s", "joint", "position_deg"))
-        for time, joint, degrees in rows:
-            writer.writerow((f"{time:.4f}", joint, f"{degrees:.3f}"))
-            count += 1
-    return count
 
 
 async def powered_sim(config: Config) -> SimServos:
@@ -121,7 +112,7 @@ def wav_seconds(path: Path) -> float:
 
 def say_with_motion(
     config: Config, voice: VoiceSettings, text: str, key: str | None,
-    wav: str | None, motion: str,
+    wav: str | None, motion: Path,
 ) -> tuple[Spoken, int]:
     """Render `text` to `wav` (a temporary file if None), then let the simulated body's
     mouth follow it in simulated time; write the trajectory to `motion`. (spoken, rows)."""

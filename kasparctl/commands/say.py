@@ -15,7 +15,7 @@ from hal.voice.api import Spoken
 from hal.voice.settings import VoiceSettings, voice_for_language
 from hal.voice.sinks import WavSink
 from hal.voice.speaker import Voice
-from kasparctl.commands.arguments import language, path
+from kasparctl.commands.arguments import language, output_file, path
 from kasparctl.config import DEFAULT_CONFIG_PATH, Config, load_config
 from kasparctl.log import configure_logging
 
@@ -28,7 +28,7 @@ def register(subparsers: Any) -> None:
         "--wav", metavar="FILE", type=path, help="write a WAV file instead of playing it"
     )
     parser.add_argument(
-        "--motion", metavar="CSV", type=path,
+        "--motion", metavar="CSV", type=output_file,
         help="also write the simulated robot's joint goals (time_s, joint, position_deg; "
         "time 0 = the WAV's first sample): the mouth following the line",
     )

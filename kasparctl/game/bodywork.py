@@ -40,6 +40,8 @@ HESITATE_AT = 0.6
 HESITATE_MAX_S = 0.5
 # Up to this strength Kaspar is sure: a quick, direct point and a nod as it asks.
 SURE_UP_TO = 0.25
+# How a point's goals are named in the joints layer's record (`demo --motion`).
+POINT_SOURCE = "point"
 
 # The behaviours the game asks for (the body's files name them).
 THINKING = "thinking"
@@ -96,9 +98,13 @@ def point_style(strength: float | None) -> PointStyle:
 
 
 async def point(servos: ServoApi, pose: dict[str, float], style: PointStyle) -> None:
-    """Move to `pose` as `style` says: straight there, or stopping part of the way first."""
+    """Move to `pose` as `style` says: straight there, or stopping part of the way first.
+
+    Each move claims only the pointing joints (ServoApi's arbitration): the body's mouth,
+    eyes and eyelids go on meanwhile. Its goals are the source POINT_SOURCE.
+    """
     if style.pause_at is None:
-        await servos.move(pose, duration=style.duration_s)
+        await servos.move(pose, duration=style.duration_s, source=POINT_SOURCE)
         return
     before = await servos.read_positions()
     share = style.pause_at
@@ -106,9 +112,9 @@ async def point(servos: ServoApi, pose: dict[str, float], style: PointStyle) -> 
         joint: before[joint] + share * (degrees - before[joint]) if joint in before else degrees
         for joint, degrees in pose.items()
     }
-    await servos.move(part, duration=style.duration_s * share)
+    await servos.move(part, duration=style.duration_s * share, source=POINT_SOURCE)
     await asyncio.sleep(style.pause_s)
-    await servos.move(pose, duration=style.duration_s * (1.0 - share))
+    await servos.move(pose, duration=style.duration_s * (1.0 - share), source=POINT_SOURCE)
 
 
 class BodyWork:
@@ -123,6 +129,8 @@ class BodyWork:
         self._plan = plan
         self._tell = tell
         self._alive: bool | None = None
+        # A cancel stilled the body: the next set_alive reaches it whatever it says.
+        self._stilled = False
 
     @property
     def fallback(self) -> bool:
@@ -146,11 +154,13 @@ class BodyWork:
     def set_alive(self, alive: bool) -> None:
         """Allow or forbid blinks, idle movements and gaze (never while the plan says no)."""
         wanted = alive and self.lively
-        if wanted == self._alive:
+        if wanted == self._alive and not self._stilled:
             return
-        self._alive = wanted
+        self._stilled = False
         self.body.set_alive(wanted)
-        self._tell({"kind": "alive", "alive": wanted})
+        if wanted != self._alive:
+            self._alive = wanted
+            self._tell({"kind": "alive", "alive": wanted})
 
     def look_at(self, kind: GazeKind, index: int = 0, name: str = "") -> None:
         """Turn to `kind` (its `index`, called `name` in the transcript), where gaze is on."""
@@ -165,5 +175,10 @@ class BodyWork:
         await self.body.perform(behaviour, strength)
 
     def cancel(self) -> None:
-        """End every behaviour at once (a pause, a fault, a stop)."""
+        """End every behaviour at once (a pause, a fault, a stop).
+
+        A cancelled body is still until asked again (kasparctl.body.api.Body.cancel): the
+        next set_alive reaches it, whatever was asked before the cancel.
+        """
         self.body.cancel()
+        self._stilled = True

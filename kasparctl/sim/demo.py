@@ -56,6 +56,7 @@ from kasparctl.game.session import EventLog
 from kasparctl.game.stages import ENDS
 from kasparctl.sim import simtime
 from kasparctl.sim.children import MAX_RESUMES, ChildPress, Hands, SimulatedGroup
+from kasparctl.sim.recording import MotionRecord, recorded_voice
 from kasparctl.sim.simulate import draw_answer_key
 from kasparctl.sim.teacher import DEFAULT_THINK_S, Messiness, Teacher
 
@@ -150,6 +151,10 @@ class DemoOptions:
     # Printed lines: the dialogue and what the children and the robot do (the
     # stdout of the moment the demo runs, not of the moment this was imported).
     out: TextIO = field(default_factory=lambda: sys.stdout)
+    # Every goal each joint received goes to this CSV (kasparctl.sim.recording).
+    motion: Path | None = None
+    # A real engine that says every line too, into WAV files the mouth follows.
+    voice: str | None = None
 
 
 @dataclass
@@ -205,6 +210,8 @@ class DemoRig(Generic[ServosT]):
     researcher: SimKeyfob | None = None
     # Kaspar's body language (the game's too): started and closed with the robot.
     body: Body = field(default_factory=StillBody)
+    # The record of every goal written (--motion), closed with the robot.
+    motion: MotionRecord | None = None
 
     async def command(self, name: str) -> None:
         """The researcher's command `name` (next, pause, undo, stop), as they give it:
@@ -247,6 +254,8 @@ class DemoRig(Generic[ServosT]):
             await self.body.close()
             await self.voice.close()
             await self.servos.close()
+            if self.motion is not None:
+                self.motion.close()
             recorder = self.game.recorder
             recorder.flush()
             if recorder.event_log is not None:
@@ -300,7 +309,8 @@ def build(
     """
     clock = LoopClock()
     servos = SimServos(config.servos, clock)
-    voice = SimVoice(options.out, clock, clips=config.voice.clips)
+    also = recorded_voice(config, options.voice, options.state_dir)
+    voice = SimVoice(options.out, clock, clips=config.voice.clips, also=also)
     return assemble(config, options, servos, voice, children_answers, body=body)
 
 
@@ -390,9 +400,11 @@ def assemble(
         game.listeners.append(children)
     game.listeners.append(_narrator(narrate))
     transcript = out if isinstance(out, Transcript) else None
+    motion = MotionRecord(servos, options.motion) if options.motion is not None else None
     return DemoRig(
         game, servos, keyfob, voice, children, resumed is not None, options.state_dir,
         transcript=transcript, abandoned=outcome.abandoned, researcher=researcher, body=body,
+        motion=motion,
     )
 
 
