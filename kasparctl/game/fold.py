@@ -251,13 +251,13 @@ class Reading:
         return None
 
     def _asking(self, index: int, name: str) -> Facts:
-        """The facts once the game asks about target `index`: a target it moved on from
-        unlearned was given up (read so only where the limit is not known)."""
+        """The facts once the game asks about target `index`: the one it moved on from after
+        an answer that left it open was given up (read so where the limit is not known)."""
         facts = self.facts
-        left = facts.asking
-        if left is not None and left != index:
-            gone = facts.target(left)
-            if self.limit is None and not gone.done and gone.trials > 0:
+        previous = facts.previous
+        if previous is not None and previous.target != index:
+            gone = facts.target(previous.target)
+            if self.limit is None and not gone.done:
                 facts = facts.with_target(replace(gone, given_up=True))
             facts = replace(facts, previous=None)
         target = facts.target(index)
@@ -329,7 +329,8 @@ class Reading:
             target,
             name=record.target or target.name,
             learned=None,
-            given_up=False,
+            # Its guesses are not counted again: with none left, it is given up at once.
+            given_up=self.limit is not None and target.trials >= self.limit,
             reopened=target.reopened + 1,
         )
         self.facts = replace(
