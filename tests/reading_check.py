@@ -19,11 +19,12 @@ rows, the report's problems) and holds every row to the same reading.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from msgspec import UNSET
+from msgspec.structs import replace
 
 from kasparctl.config import GameSettings
 from kasparctl.game.fold import Facts, Guess, Reading

@@ -41,8 +41,10 @@ reads sessions it did not write): a record that cannot apply changes nothing.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
 from typing import Literal
+
+import msgspec
+from msgspec.structs import replace
 
 from kasparctl.game.records import (
     AnyRecord,
@@ -92,8 +94,7 @@ def standing(confused: int | None, done: Sequence[bool]) -> int | None:
 # -- the facts every reader asks for -----------------------------------------------------
 
 
-@dataclass(frozen=True, slots=True)
-class Learned:
+class Learned(msgspec.Struct, frozen=True):
     """The name learned for a target, and when."""
 
     label: int
@@ -102,8 +103,7 @@ class Learned:
     trial: int  # the session's trial that taught it
 
 
-@dataclass(frozen=True, slots=True)
-class Target:
+class Target(msgspec.Struct, frozen=True):
     """One target as the records have it so far."""
 
     index: int
@@ -119,8 +119,7 @@ class Target:
         return self.learned is not None or self.given_up
 
 
-@dataclass(frozen=True, slots=True)
-class Confusion:
+class Confusion(msgspec.Struct, frozen=True):
     """Kaspar said it is confused about `target` after trial `trial`, and what it told."""
 
     target: int
@@ -134,8 +133,7 @@ class Confusion:
     reopen_name: str | None
 
 
-@dataclass(frozen=True, slots=True)
-class Answer:
+class Answer(msgspec.Struct, frozen=True):
     """The answer the next guess on its target follows."""
 
     target: int
@@ -144,8 +142,7 @@ class Answer:
     right: bool | None  # the children's answer agreed with the answer key (None: no key)
 
 
-@dataclass(frozen=True, slots=True)
-class Undoable:
+class Undoable(msgspec.Struct, frozen=True):
     """What the researcher's undo would take back: the last answer, or the last re-open."""
 
     what: Literal["answer", "reopen"]
@@ -153,8 +150,7 @@ class Undoable:
     target: int
 
 
-@dataclass(frozen=True, slots=True)
-class Guess:
+class Guess(msgspec.Struct, frozen=True):
     """One trial as the records read when it was answered."""
 
     trial: int
@@ -171,8 +167,7 @@ class Guess:
     first: bool
 
 
-@dataclass(frozen=True, slots=True)
-class Facts:
+class Facts(msgspec.Struct, frozen=True):
     """What the records say so far."""
 
     targets: tuple[Target, ...] = ()  # by index, as far as the records named them
@@ -214,8 +209,7 @@ class Facts:
     def settled(self) -> Facts:
         """These facts with the confusion that stands (none about a target done)."""
         confused = self.confused
-        done = [t.done for t in self.targets]
-        if confused is None or standing(confused.target, done) is not None:
+        if confused is None or not self.target(confused.target).done:
             return self
         return replace(self, confused=None)
 
@@ -261,8 +255,13 @@ class Reading:
                 facts = facts.with_target(replace(gone, given_up=True))
             facts = replace(facts, previous=None)
         target = facts.target(index)
-        facts = facts.with_target(replace(target, name=name or target.name))
-        return replace(facts, asking=index).settled()
+        if name and target.name != name:
+            facts = facts.with_target(replace(target, name=name))
+        elif target.index >= len(facts.targets):
+            facts = facts.with_target(target)  # named by the records from now on
+        if facts.asking != index:
+            facts = replace(facts, asking=index)
+        return facts.settled()
 
     def _trial(self, record: TrialRecord) -> Guess:
         facts = self._asking(record.target_index, record.target)
