@@ -30,12 +30,14 @@ from hal.servos.api import FaultKind
 from kasparctl.cli import main
 from kasparctl.config import Config, GameSettings, SessionPlan
 from kasparctl.game import recovery
+from kasparctl.game.fold import Reading
 from kasparctl.game.phrases import load_phrasebook
 from kasparctl.game.records import (
     STATE_CHANGING,
     AnyRecord,
     CommandRecord,
     Confirmation,
+    ConfusedRecord,
     FaultRecord,
     FaultSource,
     HalEvent,
@@ -504,3 +506,32 @@ def test_a_stop_after_a_reopen_carries_on_with_the_bag_being_asked() -> None:
     played.act("stop")
     assert played.state.target == 1 and played.state.previous is not None
     assert played.ask().target == 1
+
+
+def test_records_that_do_not_fit_change_nothing_and_raise_nothing() -> None:
+    """The research reads sessions it did not write: an undo of an answer that is not the
+    last, a re-open taken back that was never made, a target no game has."""
+    played = Played(SMALL, 2)
+    played.answer("red")
+    played.answer("red")
+    reading = Reading(SMALL.max_trials_per_target)
+    for record in played.readers.records:
+        reading.apply(record)
+    facts = reading.facts
+    stray = ReopenRecord(trial=2, target="bag 3", target_index=2, name="lion", name_index=0)
+    for record in (
+        UndoRecord(trial=1),  # not the last answer
+        msgspec.structs.replace(stray, taken_back=True),  # never re-opened
+        ConfusedRecord(
+            trial=2,
+            target="bag 9",
+            target_index=-1,
+            reason="all_rejected",
+            rejected=[],
+            reopen_target=None,
+            reopen_name=None,
+        ),
+        msgspec.structs.replace(stray, target_index=10**9),
+    ):
+        reading.apply(record)
+        assert reading.facts == facts, record

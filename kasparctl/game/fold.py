@@ -323,6 +323,8 @@ class Reading:
                 self._before_undoable = None
             return
         target = facts.target(index)
+        if target.learned is None:
+            return  # nothing learned to re-open: the game refuses such a re-open
         self._before_undoable = facts
         reopened = replace(
             target,
@@ -340,6 +342,8 @@ class Reading:
         )
 
     def _confused(self, record: ConfusedRecord) -> None:
+        if not 0 <= record.target_index < MAX_TARGETS:
+            return  # about a target no game has: damage
         confusion = Confusion(
             target=record.target_index,
             target_name=record.target,
