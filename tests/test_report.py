@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 import json
 import statistics
 import sys
@@ -35,22 +34,25 @@ def report(study: Study, tmp_path_factory: pytest.TempPathFactory) -> Path:
 def expected_by_condition(study: Study) -> dict[str, dict[str, Any]]:
     """The paper's figures straight from the JSON lines, without kasparctl's statistics."""
     trials_by_label: dict[str, list[list[dict[str, Any]]]] = {}
+    pairs_by_label: dict[str, list[tuple[dict[str, Any], dict[str, Any]]]] = {}
     sessions: dict[str, int] = {}
     for session_id, planned in study.planned.items():
         spoken = "spoken" if planned.speak_uncertainty else "silent"
         # The fixture mixes variants, so the variant is part of each label.
         label = f"{planned.profile}/{spoken} ({planned.variant})"
         sessions[label] = sessions.get(label, 0) + 1
-        trials = counted_trials(raw_records(study.state_dir / "sessions" / session_id))
+        records = raw_records(study.state_dir / "sessions" / session_id)
+        trials = counted_trials(records)
         problems: dict[int, list[dict[str, Any]]] = {}
         for trial in trials:
             problems.setdefault(trial["target_index"], []).append(trial)
         trials_by_label.setdefault(label, []).extend(problems.values())
+        pairs_by_label.setdefault(label, []).extend(followed(records, trials))
     expected = {}
     for label, problems in trials_by_label.items():
         learned = [p for p in problems if p[-1]["learned"]]
         lengths = [len(p) for p in learned]
-        pairs = [pair for p in problems for pair in itertools.pairwise(p)]
+        pairs = pairs_by_label[label]
         trials = [t for p in problems for t in p]
         longest = max(len(p) for p in problems)
         expected[label] = {
@@ -83,6 +85,25 @@ def expected_by_condition(study: Study) -> dict[str, dict[str, Any]]:
             ],
         }
     return expected
+
+
+def followed(
+    records: list[dict[str, Any]], counted: list[dict[str, Any]]
+) -> list[tuple[dict[str, Any], dict[str, Any]]]:
+    """Each counted trial with the one before it on its target, but the first after the
+    researcher re-opened the target's name: the green that had taught it was taken back."""
+    kept = {id(trial) for trial in counted}
+    last: dict[int, dict[str, Any]] = {}
+    pairs = []
+    for record in records:
+        if record["kind"] == "reopen" and not record.get("taken_back"):
+            last.pop(record["target_index"], None)
+        elif id(record) in kept:
+            before = last.get(record["target_index"])
+            if before is not None:
+                pairs.append((before, record))
+            last[record["target_index"]] = record
+    return pairs
 
 
 def test_summary_numbers_equal_those_computed_from_the_raw_records(

@@ -9,7 +9,10 @@ These rules notice it and let the researcher undo it:
   name still offered has been answered red there (`ALL_REJECTED`: the right one is
   gone, or a child pressed red for it), or when a name learned for another target
   was answered green here (`LEARNED_ELSEWHERE`, where learned names stay offered).
-  It says so once per target, and asks the researcher (a ConfusedRecord).
+  It says so once per target, and asks the researcher (a ConfusedRecord). Only
+  about a target still asked: an answer that made the target learned or given up
+  confuses nobody, and a confusion ends once its target is done (the one rule of
+  kasparctl.game.fold, which every reader of the records applies).
 - **Re-open.** The researcher's "reopen" makes the name learned last learned no
   more: it is offered again, its target is asked again once the current one is
   done (a ReopenRecord; again re-opens the one before). Their undo takes it back.
@@ -57,12 +60,15 @@ def confusion(
     state: GameState, record: TrialRecord, settings: GameSettings
 ) -> ConfusedRecord | None:
     """Whether Kaspar is confused after `record`, applied to `state` (None: it is not,
-    it said so already for this target, or the session was planned without recovery)."""
+    it said so already for this target, the answer made the target done, or the session
+    was planned without recovery)."""
     if record.rejected is UNSET:
         return None
     target = record.target_index
     if state.confused == target:
         return None  # said once, until a name is re-opened or the target is done
+    if state.progress[target].done:
+        return None  # nothing more is asked about it (kasparctl.game.fold.standing)
     reason, name, learned_for = None, None, None
     if record.green:
         elsewhere = [
@@ -73,8 +79,7 @@ def confusion(
         if elsewhere:
             reason, name = LEARNED_ELSEWHERE, record.choice
             learned_for = settings.targets[elsewhere[-1]]
-    stuck = not state.progress[target].done and all_rejected(state.offered, record.rejected)
-    if reason is None and stuck:
+    if reason is None and all_rejected(state.offered, record.rejected):
         reason = ALL_REJECTED
     if reason is None:
         return None

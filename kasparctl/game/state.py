@@ -9,6 +9,10 @@ Records that change the state: step, pose, trial, undo, confused, reopen, and
 a command that paused or resumed (kasparctl.game.records.STATE_CHANGING). Every other kind
 (presses, prompts, faults, HAL events) is history only. The snapshot is this
 struct as JSON, encoded and decoded by kasparctl.game.session.
+
+What every reader of the records also asks (the answer a guess follows for its
+flags, whether Kaspar is confused) follows the rules of kasparctl.game.fold,
+which the live view, STATUS= and the research read the records with.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from msgspec import UNSET, UnsetType
 
 from hal.errors import KasparError
 from kasparctl.config import GameSettings
+from kasparctl.game import fold
 from kasparctl.game.problem import TargetProgress
 from kasparctl.game.records import (
     STATE_CHANGING,
@@ -79,8 +84,8 @@ class GameState(msgspec.Struct, eq=False):
     trials: int = 0  # trials recorded in this session; the next one is trials + 1
     turn: int = 0  # children answer in rotation: child (turn % group size)
     target: int = 0  # the target Kaspar is guessing
-    # The previous answered guess on the current target (choice, green), for the
-    # paper's perseverative-error and win-shift flags.
+    # The answer the next guess on the current target follows (choice, green), for the
+    # paper's perseverative-error and win-shift flags (kasparctl.game.fold.flags).
     previous: tuple[int, bool] | None = None
     # target -> joints: where Kaspar points (the median of every pose shown for it).
     poses: dict[str, dict[str, float]] = msgspec.field(default_factory=dict)
@@ -155,8 +160,7 @@ class GameState(msgspec.Struct, eq=False):
         elif isinstance(record, UndoRecord):
             self._apply_undo(record)
         elif isinstance(record, ConfusedRecord):
-            done = self.progress[record.target_index].done
-            self.confused = None if done else record.target_index
+            self.confused = fold.standing(record.target_index, self._done())
         elif isinstance(record, ReopenRecord):
             if record.taken_back is True:
                 self._apply_reopen_taken_back(record)
@@ -167,13 +171,19 @@ class GameState(msgspec.Struct, eq=False):
         ):
             self.paused = record.confirm == Confirmation.PAUSE
 
+    def _done(self) -> list[bool]:
+        return [progress.done for progress in self.progress]
+
     def _apply_step(self, step: str) -> None:
         if step == "stopped" and self.step in STEPS:
             self.stopped_from = self.step
         elif step in STEPS and self.step == "stopped":
             self.stopped_from = UNSET  # reopened
         self.step = step
-        if step == "guessing":
+        asked = self.progress[self.target] if 0 <= self.target < len(self.progress) else None
+        if step == "guessing" and (asked is None or asked.done):
+            # The target asked stays asked until it is done (a re-opened one waits its
+            # turn, after a stop too): the game leaves a target only once it is done.
             open_target = self.first_open_target()
             self.target = self.target if open_target is None else open_target
 
@@ -219,7 +229,7 @@ class GameState(msgspec.Struct, eq=False):
         self.turn += 1
         progress = self.progress[target]
         learned_now = progress.record(choice, record.green)
-        self.previous = (choice, record.green)
+        self.previous = fold.followed(choice, record.green, progress.done)
         if record.rejected is not UNSET:
             # Planned with recovery: what was rejected here, and the order names are learned.
             if self.rejected is UNSET:
@@ -228,12 +238,11 @@ class GameState(msgspec.Struct, eq=False):
             if learned_now:
                 order = [i for i in self.learned_targets() if i != target]
                 self.learned_order = [*order, target]
-        if progress.done and self.confused == target:
-            self.confused = None
+        if self.confused is not UNSET:
+            self.confused = fold.standing(self.confused, self._done())
         if progress.done:
             if learned_now and settings.exclude_learned:
                 self.offered[choice] = False
-            self.previous = None
             next_target = self.first_open_target()
             self.target = self.target if next_target is None else next_target
 

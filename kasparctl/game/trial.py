@@ -22,6 +22,7 @@ import numpy as np
 from msgspec import UNSET
 
 from kasparctl.config import GameSettings, SessionPlan
+from kasparctl.game.fold import flags
 from kasparctl.game.phrases import PhraseBook
 from kasparctl.game.records import Button, QuestionRecord, TrialRecord
 from kasparctl.game.recovery import rejected_after
@@ -167,7 +168,7 @@ def score_answer(
     progress_after.record(choice, green)
     next_target = target if not progress_after.done else next_open_target(state, target)
     q_after = update(state.learner.table, target, choice, reward, params, next_target)[target]
-    previous = state.previous
+    perseverative, win_shift = flags(state.previous, choice)
     answer_key = session_plan.answer_key
     correct = None if not answer_key else settings.toys.index(answer_key[target]) == choice
     return TrialRecord(
@@ -193,8 +194,8 @@ def score_answer(
         q_before=state.learner.table[target].tolist(),
         q_after=q_after.tolist(),
         learner_rng=plan.learner_rng,
-        perseverative=previous is not None and not previous[1] and previous[0] == choice,
-        win_shift=previous is not None and previous[1] and previous[0] != choice,
+        perseverative=perseverative,
+        win_shift=win_shift,
         correct=correct,
         feedback_right=None if correct is None else correct == green,
         learned=progress_after.learned is not None,

@@ -7,7 +7,11 @@ the problem: the caller leaves it out, and it stays marked in the records.
 
 The trials come in as the game's trial records (kasparctl.game.records.TrialRecord);
 this module asks only for the fields it reads (`RecordedTrial`), so the learning
-layer needs nothing of the game.
+layer needs nothing of the game. A trial's perseverative and win-shift flags are
+the ones the records read (kasparctl.game.fold: the research passes them, else
+the record's own, which the game wrote by the same rule), never recounted from
+the guess before it in the list: after a re-open that one is not the guess it
+follows.
 """
 
 from __future__ import annotations
@@ -55,6 +59,16 @@ class RecordedTrial(Protocol):
         ...
 
     @property
+    def perseverative(self) -> bool:
+        """The record's own flag: the label answered red just before, chosen again."""
+        ...
+
+    @property
+    def win_shift(self) -> bool:
+        """The record's own flag: another label chosen right after a green."""
+        ...
+
+    @property
     def candidates(self) -> list[str]:
         """The labels offered, by name."""
         ...
@@ -68,9 +82,9 @@ class RecordedTrial(Protocol):
 class ProblemBuilder:
     """Problems built from a session's trials one at a time, holding only what they need.
 
-    Each trial is kept as the four values the statistics read (choice, answer,
-    entropy, correctness), never as the record, so a session of any length costs
-    a few dozen bytes per trial.
+    Each trial is kept as the values the statistics read (choice, answer, entropy,
+    correctness, flags), never as the record, so a session of any length costs a few
+    dozen bytes per trial.
     """
 
     def __init__(
@@ -91,15 +105,21 @@ class ProblemBuilder:
         self._last: dict[int, tuple[int | None, tuple[str, ...], tuple[float, ...]]] = {}
         self._candidates: dict[int, int] = {}
 
-    def add(self, trial: RecordedTrial) -> None:
-        """One trial that counts (undone ones are left out by the caller), in recorded order."""
+    def add(self, trial: RecordedTrial, flags: tuple[bool, bool] | None = None) -> None:
+        """One trial that counts (undone ones are left out by the caller), in recorded order;
+        `flags` (perseverative, win_shift) as the records read, else the record's own."""
         target = trial.target_index
+        perseverative, win_shift = (
+            (trial.perseverative, trial.win_shift) if flags is None else flags
+        )
         self._trials.setdefault(target, []).append(
             TrialRecord(
                 choice=trial.choice_index,
                 feedback=trial.green,
                 entropy=trial.entropy,
                 correct=trial.correct,
+                perseverative=perseverative,
+                win_shift=win_shift,
             )
         )
         self._candidates.setdefault(target, len(trial.candidates))

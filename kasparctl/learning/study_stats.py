@@ -12,6 +12,10 @@ Definitions, as the paper uses them:
 - a perseverative error: choosing the same label again right after it got red;
 - a win-shift: choosing a different label right after a green;
   both within one problem, counted per trial (the paper: 1 of each in 202);
+  "right after" is the guess before on the same problem, except that a
+  problem's first guess after the researcher re-opened its name follows none
+  (the green that had taught it was taken back): recorded trials carry their
+  flags as kasparctl.game.fold reads them, simulated ones are compared pairwise;
   each is attributed, where the answer is known, to the children's feedback
   before it: "after wrong feedback" when that red was for the right label (or
   that green for a wrong one), "exploratory" when it was right (the paper
@@ -53,6 +57,11 @@ class TrialRecord(msgspec.Struct, frozen=True, gc=False):
     entropy: float
     # None when the answer is unknown (a session recorded without an answer key).
     correct: bool | None
+    # The flags as the records read (kasparctl.game.fold, which knows which guess this
+    # one follows: none after a re-open); None: from the guess before it in the problem,
+    # as a simulated problem is asked in one go.
+    perseverative: bool | None = None
+    win_shift: bool | None = None
 
 
 class ProblemRecord(msgspec.Struct, frozen=True):
@@ -146,6 +155,16 @@ class ErrorCounts(msgspec.Struct, frozen=True):
     win_shift_exploratory: int = 0
 
 
+def is_perseverative(previous_choice: int, previous_feedback: bool | None, choice: int) -> bool:
+    """A perseverative error: the label that was just answered red, chosen again."""
+    return previous_feedback is False and choice == previous_choice
+
+
+def is_win_shift(previous_choice: int, previous_feedback: bool | None, choice: int) -> bool:
+    """A win-shift: another label chosen right after a green."""
+    return previous_feedback is True and choice != previous_choice
+
+
 def count_perseverative_and_win_shift(trials: Sequence[TrialRecord]) -> tuple[int, int]:
     """Perseverative errors and win-shifts within one problem's trials."""
     counts = count_errors(trials)
@@ -161,9 +180,16 @@ def count_errors(trials: Sequence[TrialRecord]) -> ErrorCounts:
     """
     counts = [0] * 6
     for previous, current in itertools.pairwise(trials):
-        if previous.feedback is False and current.choice == previous.choice:
+        if current.perseverative is None or current.win_shift is None:
+            flags = (
+                is_perseverative(previous.choice, previous.feedback, current.choice),
+                is_win_shift(previous.choice, previous.feedback, current.choice),
+            )
+        else:
+            flags = (current.perseverative, current.win_shift)
+        if flags[0]:
             kind = 0
-        elif previous.feedback is True and current.choice != previous.choice:
+        elif flags[1]:
             kind = 1
         else:
             continue

@@ -6,10 +6,12 @@ The pilot and the names game are different games, so when the sessions mix
 variants the variant is part of the condition too.
 
 Everything is collected in one streaming pass over each session's records
-(kasparctl.research.walk): per problem the four values per trial the paper's
-statistics need, per cluster (the unit a confidence interval resamples: a
-group of children, or a session) the counts of checked answers, and per
-child the teaching measures of kasparctl.research.children.
+(kasparctl.research.walk): per problem the values per trial the paper's
+statistics need (with the flags as the records read, kasparctl.game.fold, so
+the report counts what the trials CSV marks), per cluster (the unit a
+confidence interval resamples: a group of children, or a session) the counts
+of checked answers, and per child the teaching measures of
+kasparctl.research.children.
 """
 
 from __future__ import annotations
@@ -146,7 +148,8 @@ def _collect(
                 continue
             if len(record.q_after) != len(toys):
                 continue  # damage the index warned about
-            builder.add(record)
+            guess = walked.guess
+            builder.add(record, None if guess is None else (guess.perseverative, guess.win_shift))
             feedback.add(record)
             condition.reaction_times.append(record.reaction_time)
             condition.feedback_by_position.setdefault(record.child_index + 1, Feedback()).add(

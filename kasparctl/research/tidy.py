@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any, TextIO
 
 from kasparctl.game.jsonl import record_to_plain
-from kasparctl.game.records import ConfusedRecord, ReopenRecord, TrialRecord
+from kasparctl.game.records import TrialRecord
 from kasparctl.research.anonymise import NO_PSEUDONYMS, Pseudonyms
 from kasparctl.research.catalogue import SessionData
 from kasparctl.research.output import text_output
@@ -141,11 +141,9 @@ def trial_rows(
     names = Pseudonyms(session.first_names()) if anonymise else NO_PSEUDONYMS
     answer_key = session.answer_key
     identity = session.identity
-    recovery = _Recovery()
     for walked in walk(session):
-        trial = walked.record
-        recovery.see(trial)
-        if not isinstance(trial, TrialRecord):
+        trial, guess = walked.record, walked.guess
+        if not isinstance(trial, TrialRecord) or guess is None:
             continue
         target_index, child_index = trial.target_index, trial.child_index
         code = session.participant(child_index)
@@ -173,9 +171,10 @@ def trial_rows(
             "feedback": trial.feedback,
             "reaction_time": trial.reaction_time,
             "reward": trial.reward,
-            "perseverative": trial.perseverative,
-            "win_shift": trial.win_shift,
-            "error_cause": walked.cause,
+            # As the records read (kasparctl.game.fold), like the report's counts.
+            "perseverative": guess.perseverative,
+            "win_shift": guess.win_shift,
+            "error_cause": guess.cause,
             "correct": trial.correct,
             "feedback_right": trial.feedback_right,
             "learned": trial.learned,
@@ -185,37 +184,14 @@ def trial_rows(
                 if 0 <= target_index < len(answer_key)
                 else None
             ),
-            "confused": recovery.confused == target_index,
-            "reopened": recovery.reopened.get(target_index, 0) > 0,
+            "confused": guess.confused,
+            "reopened": guess.reopened,
             "time": trial.time,
         }
-        recovery.after(trial)
         for prefix, values in _per_toy(trial):
             for toy, value in zip(session.toys, values, strict=False):
                 row[prefix + toys[toy]] = value
         yield row
-
-
-class _Recovery:
-    """Which targets Kaspar is confused about, and which were re-opened, record by record
-    (kasparctl.game.recovery): a trial asked while confused, or on a re-opened target."""
-
-    def __init__(self) -> None:
-        self.confused: int | None = None
-        self.reopened: dict[int, int] = {}
-
-    def see(self, record: object) -> None:
-        if isinstance(record, ConfusedRecord):
-            self.confused = record.target_index
-        elif isinstance(record, ReopenRecord):
-            change = -1 if record.taken_back is True else 1
-            self.reopened[record.target_index] = self.reopened.get(record.target_index, 0) + change
-            if change > 0:
-                self.confused = None
-
-    def after(self, trial: TrialRecord) -> None:
-        if trial.learned and self.confused == trial.target_index:
-            self.confused = None
 
 
 def _per_toy(trial: TrialRecord) -> tuple[tuple[str, list[float]], ...]:

@@ -2,12 +2,14 @@
 
 Streamed, so a session of any size is read in constant memory. What is added:
 
-- for a trial: whether it was undone, and for a perseverative error or a
-  win-shift its cause: "after_wrong_feedback" when the children's answer to
-  the guess before it on this target was wrong (a red for the right toy, a
-  green for a wrong one), "exploratory" when that answer was right (Kaspar's
-  own exploration, as the paper attributes its events), "unknown" without an
-  answer key;
+- for a trial: whether it was undone, and how the records read when it was
+  answered (kasparctl.game.fold, the one reading the game, STATUS= and the live
+  view share): its perseverative and win-shift flags, for either its cause
+  ("after_wrong_feedback" when the children's answer to the guess it follows
+  was wrong: a red for the right toy, a green for a wrong one; "exploratory"
+  when that answer was right, Kaspar's own exploration as the paper attributes
+  its events; "unknown" without an answer key), whether Kaspar was confused
+  about its target, and whether its target had been re-opened;
 - for a prompt while guessing, an extra press and an undo: the child it
   concerns (whose question went unanswered, whose answer got the extra
   press, whose answer was taken back), by place in the turn order. Children
@@ -21,6 +23,7 @@ from collections import OrderedDict
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from kasparctl.game.fold import AFTER_WRONG_FEEDBACK, EXPLORATORY, UNKNOWN, Guess, Reading
 from kasparctl.game.records import (
     AnyRecord,
     PressRecord,
@@ -31,9 +34,7 @@ from kasparctl.game.records import (
 )
 from kasparctl.research.catalogue import SessionData
 
-EXPLORATORY = "exploratory"
-AFTER_WRONG_FEEDBACK = "after_wrong_feedback"
-UNKNOWN = "unknown"
+__all__ = ["AFTER_WRONG_FEEDBACK", "EXPLORATORY", "UNKNOWN", "Walked", "walk"]
 # Undos and extra presses refer to the last answer; a few hundred back is plenty.
 _RECENT_TRIALS = 256
 
@@ -45,8 +46,14 @@ class Walked:
     record: AnyRecord
     child_index: int | None = None
     undone: bool = False
-    # For a perseverative error or a win-shift: EXPLORATORY, AFTER_WRONG_FEEDBACK or UNKNOWN.
-    cause: str | None = None
+    # A trial as the records read when it was answered (kasparctl.game.fold).
+    guess: Guess | None = None
+
+    @property
+    def cause(self) -> str | None:
+        """For a perseverative error or a win-shift: EXPLORATORY, AFTER_WRONG_FEEDBACK or
+        UNKNOWN."""
+        return None if self.guess is None else self.guess.cause
 
 
 def walk(session: SessionData) -> Iterator[Walked]:
@@ -56,24 +63,17 @@ def walk(session: SessionData) -> Iterator[Walked]:
     step = ""
     turn = 0
     recent: OrderedDict[int, int] = OrderedDict()
-    # The children's last counted answer on each target: was it right (None: no key)?
-    last_right: dict[int, bool | None] = {}
+    # The research is not told the session's limit of guesses: a give-up is read when
+    # the game moves on, which is before any later trial.
+    reading = Reading()
     for record in session.records():
+        guess = reading.apply(record)
         if isinstance(record, TrialRecord):
-            is_undone = record.trial in undone
-            cause = None
-            if record.perseverative or record.win_shift:
-                right = last_right.get(record.target_index)
-                cause = (
-                    UNKNOWN if right is None else (EXPLORATORY if right else AFTER_WRONG_FEEDBACK)
-                )
-            if not is_undone:
-                last_right[record.target_index] = record.feedback_right
             recent[record.trial] = record.child_index
             if len(recent) > _RECENT_TRIALS:
                 recent.popitem(last=False)
             turn += 1
-            yield Walked(record, record.child_index, is_undone, cause)
+            yield Walked(record, record.child_index, record.trial in undone, guess)
         elif isinstance(record, UndoRecord):
             turn -= 1
             yield Walked(record, recent.get(record.trial))

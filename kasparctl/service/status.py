@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from kasparctl.config import GameSettings
+from kasparctl.game import fold
 from kasparctl.game.records import FaultSource
 from kasparctl.game.recovery import reopen_record
 from kasparctl.game.state import GameState
@@ -71,10 +72,15 @@ def status_line(
 
 def recovery_words(state: GameState | None, settings: GameSettings) -> str | None:
     """Kaspar is confused and asks the researcher (kasparctl.game.recovery): which target,
-    and what their reopen would re-open; None when it is not confused."""
+    and what their reopen would re-open; None when it is not confused (the one rule of
+    kasparctl.game.fold, as the live view and the trials CSV read it: about a target still
+    open only)."""
     if state is None or not isinstance(state.confused, int):
         return None
-    target = settings.targets[state.confused]
+    confused = fold.standing(state.confused, [progress.done for progress in state.progress])
+    if confused is None:
+        return None
+    target = settings.targets[confused]
     reopen = reopen_record(state, settings)
     if reopen is None:
         return f"Kaspar is confused about {target}"

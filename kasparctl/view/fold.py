@@ -12,6 +12,12 @@ The stage follows the machine as the records tell it: a step record moves it,
 an applied pause or resume, a fault the game stopped for, a shutdown of the
 daemon and a resume of the session; where the records cannot tell (a record
 written by newer code, a session cut short), the last known stage stands.
+
+What is learned, given up and re-opened, whether Kaspar is confused, and each
+answer's flags are read as the game, STATUS= and the research read them
+(kasparctl.game.fold.Reading). The view is not told the session's limit of
+guesses unless it is given it: it then sees a bag given up when the game asks
+about the next one.
 """
 
 from __future__ import annotations
@@ -23,12 +29,12 @@ from typing import Any
 
 from msgspec import UNSET
 
+from kasparctl.game.fold import Confusion, Facts, Guess, Reading
 from kasparctl.game.records import (
     AlertRecord,
     AnyRecord,
     CommandRecord,
     Confirmation,
-    ConfusedRecord,
     FaultRecord,
     HalEvent,
     HalRecord,
@@ -87,9 +93,11 @@ def session_view(
     plan: Mapping[str, Any] | None,
     records: Sequence[AnyRecord],
     warnings: Sequence[str] = (),
+    limit: int | None = None,
 ) -> SessionView:
-    """The view of a session from its plan.json (None if unreadable) and its records in order."""
-    fold = SessionFold(plan)
+    """The view of a session from its plan.json (None if unreadable) and its records in order;
+    `limit` its max_trials_per_target, if known."""
+    fold = SessionFold(plan, limit)
     for record in records:
         fold.apply(record)
     return replace(fold.view, warnings=tuple(warnings))
@@ -117,12 +125,15 @@ def _identity(meta: Mapping[str, Any]) -> SessionView:
 class SessionFold:
     """The view so far, moved on one record at a time (a replay steps forward with it)."""
 
-    def __init__(self, plan: Mapping[str, Any] | None) -> None:
-        """The view of a session with `plan` (its plan.json) and no records yet."""
+    def __init__(self, plan: Mapping[str, Any] | None, limit: int | None = None) -> None:
+        """The view of a session with `plan` (its plan.json) and no records yet; `limit` its
+        max_trials_per_target, if known (the records do not say it)."""
         self.view = _identity(plan or {})
+        self.reading = Reading(limit)
 
     def apply(self, record: AnyRecord) -> None:
         """Move the view on by the next record."""
+        guess = self.reading.apply(record)
         view = self.view
         view = replace(
             view,
@@ -132,8 +143,49 @@ class SessionFold:
             # Anything recorded after a shutdown means the daemon is back.
             shutdown=None,
         )
-        handler = _HANDLERS.get(type(record))
-        self.view = handler(view, record) if handler is not None else view
+        if isinstance(record, TrialRecord) and guess is not None:
+            view = _on_trial(view, record, guess)
+        else:
+            handler = _HANDLERS.get(type(record))
+            view = handler(view, record) if handler is not None else view
+        self.view = _as_read(view, self.reading.facts)
+
+
+def _as_read(view: SessionView, facts: Facts) -> SessionView:
+    """The view with what the records read: learned (in the order learned), given up,
+    re-opened, and whether Kaspar is confused."""
+    learned = tuple(
+        Learned(target.name, item.name, item.problem_trial, item.trial)
+        for target in (facts.target(index) for index in facts.learned_order)
+        if (item := target.learned) is not None
+    )
+    given_up = tuple(target.name for target in facts.targets if target.given_up)
+    confused = _confused_line(facts.confused)
+    if (learned, given_up, confused, facts.reopens) == (
+        view.learned,
+        view.given_up,
+        view.confused,
+        view.reopens,
+    ):
+        return view
+    return replace(
+        view, learned=learned, given_up=given_up, confused=confused, reopens=facts.reopens
+    )
+
+
+def _confused_line(confusion: Confusion | None) -> str | None:
+    """What the researcher is told while Kaspar is confused: about what, why, and what
+    their re-open would re-open."""
+    if confusion is None:
+        return None
+    if confusion.reason == "learned_elsewhere" and confusion.name is not None:
+        why = f"{confusion.name} was answered green here, learned for {confusion.learned_for}"
+    else:
+        why = "every name left was answered red"
+    ask = ""
+    if confusion.reopen_name is not None:
+        ask = f"; reopen makes {confusion.reopen_name} ({confusion.reopen_target}) unlearned"
+    return f"{confusion.target_name}: {why}{ask}"
 
 
 def _on_session(view: SessionView, record: SessionRecord) -> SessionView:
@@ -317,7 +369,7 @@ def _on_question(view: SessionView, record: QuestionRecord) -> SessionView:
     )
 
 
-def _on_trial(view: SessionView, record: TrialRecord) -> SessionView:
+def _on_trial(view: SessionView, record: TrialRecord, guess: Guess) -> SessionView:
     asked = view.question
     if asked is not None and asked.trial == record.trial:
         question = asked
@@ -337,49 +389,24 @@ def _on_trial(view: SessionView, record: TrialRecord) -> SessionView:
         correct=record.correct,
         feedback_right=record.feedback_right,
         learned=record.learned,
-        perseverative=record.perseverative,
-        win_shift=record.win_shift,
+        perseverative=guess.perseverative,
+        win_shift=guess.win_shift,
         time=record.time,
     )
-    learned = view.learned
-    confused = view.confused
-    if record.learned:
-        learned = (
-            *learned,
-            Learned(record.target, record.choice, record.problem_trial, record.trial),
-        )
-        if confused is not None and confused.startswith(f"{record.target}:"):
-            confused = None
     return replace(
         view,
         question=question,
         toys=toys,
         answers=(*view.answers, answer),
-        learned=learned,
         targets=_with_target(view.targets, record.target),
-        confused=confused,
     )
-
-
-def _on_confused(view: SessionView, record: ConfusedRecord) -> SessionView:
-    if record.reason == "learned_elsewhere" and isinstance(record.name, str):
-        why = f"{record.name} was answered green here, learned for {record.learned_for}"
-    else:
-        why = "every name left was answered red"
-    if record.reopen_name is not None:
-        ask = f"; reopen makes {record.reopen_name} ({record.reopen_target}) unlearned"
-    else:
-        ask = ""
-    return replace(view, confused=f"{record.target}: {why}{ask}")
 
 
 def _on_reopen(view: SessionView, record: ReopenRecord) -> SessionView:
     if record.taken_back is True:
-        learned = (*view.learned, Learned(record.target, record.name, 0, record.trial))
-        return replace(view, learned=learned, reopens=max(0, view.reopens - 1))
-    learned = tuple(item for item in view.learned if item.target != record.target)
+        return view
     alerts = tuple(alert for alert in view.alerts if not alert.startswith(f"{record.name} "))
-    return replace(view, learned=learned, reopens=view.reopens + 1, confused=None, alerts=alerts)
+    return replace(view, alerts=alerts)
 
 
 def _on_alert(view: SessionView, record: AlertRecord) -> SessionView:
@@ -395,11 +422,10 @@ def _on_undo(view: SessionView, record: UndoRecord) -> SessionView:
         replace(answer, undone=True) if answer.trial == record.trial else answer
         for answer in view.answers
     )
-    learned = tuple(item for item in view.learned if item.trial != record.trial)
     question = view.question
     if question is not None and question.trial == record.trial:
         question = replace(question, undone=True)
-    return replace(view, answers=answers, learned=learned, question=question)
+    return replace(view, answers=answers, question=question)
 
 
 _HANDLERS: dict[type, Any] = {
@@ -412,9 +438,7 @@ _HANDLERS: dict[type, Any] = {
     PressRecord: _on_press,
     PromptRecord: _on_prompt,
     QuestionRecord: _on_question,
-    TrialRecord: _on_trial,
     UndoRecord: _on_undo,
-    ConfusedRecord: _on_confused,
     ReopenRecord: _on_reopen,
     AlertRecord: _on_alert,
 }

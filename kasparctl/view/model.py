@@ -85,7 +85,7 @@ class Answer:
 
 @dataclass(frozen=True, slots=True)
 class Learned:
-    """A target whose toy Kaspar learned, and in how many guesses."""
+    """A target whose toy Kaspar learned, and in how many guesses (kasparctl.game.fold)."""
 
     target: str
     toy: str
@@ -153,8 +153,11 @@ class SessionView:
     commands: tuple[CommandSeen, ...] = ()
     faults: tuple[FaultSeen, ...] = ()
     keyfob_lost: bool = False
+    # The targets given up (not learned in the session's limit of guesses), in order.
+    given_up: tuple[str, ...] = ()
     # Kaspar is confused and asks the researcher (kasparctl.game.recovery): what to tell
-    # them, until a name is re-opened or the target is learned; None otherwise.
+    # them, until a name is re-opened or the target is done (learned or given up; the
+    # rule of kasparctl.game.fold); None otherwise.
     confused: str | None = None
     # Right toys no longer offered (with the answer key), until re-opened: one line each.
     alerts: tuple[str, ...] = ()
