@@ -6,7 +6,9 @@ on a graph with a deliberately broken wall.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
+from pathlib import Path
 
 import pytest
 from import_graph import Edge, cycles, edges, modules
@@ -114,3 +116,58 @@ def test_every_room_of_the_controller_is_on_the_plan() -> None:
 def test_each_rule_fails_on_a_broken_wall(extra: Edge, expected: str) -> None:
     breaches = wall_breaches([*edges(), extra])
     assert any(expected in line and str(extra.source) in line for line in breaches), breaches
+
+
+# -- the room list of docs/architecture.md, held against the tree ---------------------------
+
+ROOT = Path(__file__).resolve().parent.parent
+ROOM_LINE = re.compile(r"^((?:hal|kasparctl)/(?:[a-z_]+/)?)\s*(.*)$")
+MODULE_LINE = re.compile(r"^  ([a-z_0-9]+)\s{2,}\S")
+
+
+def documented_rooms(text: str) -> dict[str, set[str]]:
+    """The rooms block of docs/architecture.md: room folder -> the module names listed."""
+    block = text.split("## Rooms", 1)[1].split("```", 2)[1]
+    rooms: dict[str, set[str]] = {}
+    current: str | None = None
+    for line in block.splitlines():
+        if room_match := ROOM_LINE.match(line):
+            current = room_match.group(1)
+            rooms.setdefault(current, set())
+        elif (module_match := MODULE_LINE.match(line)) and current is not None:
+            rooms[current].add(module_match.group(1))
+    return rooms
+
+
+def rooms_in_tree(root: Path) -> dict[str, set[str]]:
+    """Every package folder of hal/ and kasparctl/ -> its modules (without __init__)."""
+    found: dict[str, set[str]] = {}
+    for package in ("hal", "kasparctl"):
+        for path in sorted((root / package).rglob("*.py")):
+            if "__pycache__" in path.parts or path.stem == "__init__":
+                continue
+            folder = path.parent.relative_to(root).as_posix() + "/"
+            found.setdefault(folder, set()).add(path.stem)
+    return found
+
+
+def test_the_room_list_names_every_module_and_only_modules_that_exist() -> None:
+    documented = documented_rooms((ROOT / "docs" / "architecture.md").read_text())
+    tree = rooms_in_tree(ROOT)
+    assert set(documented) == set(tree), "rooms: " + str(set(documented) ^ set(tree))
+    for folder, modules in tree.items():
+        assert documented[folder] == modules, (
+            folder,
+            "not documented: " + ", ".join(sorted(modules - documented[folder])),
+            "documented, not there: " + ", ".join(sorted(documented[folder] - modules)),
+        )
+
+
+def test_the_room_list_is_read_as_written_and_the_tree_as_it_is(tmp_path: Path) -> None:
+    (tmp_path / "hal").mkdir()
+    (tmp_path / "kasparctl").mkdir()
+    (tmp_path / "hal" / "clock.py").write_text("")
+    (tmp_path / "hal" / "errors.py").write_text("")
+    doc = "## Rooms\n\n```\nhal/   the hardware\n  clock       time\n```\n"
+    assert documented_rooms(doc) == {"hal/": {"clock"}}
+    assert rooms_in_tree(tmp_path)["hal/"] == {"clock", "errors"}
