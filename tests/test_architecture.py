@@ -155,11 +155,11 @@ def test_the_room_list_names_every_module_and_only_modules_that_exist() -> None:
     documented = documented_rooms((ROOT / "docs" / "architecture.md").read_text())
     tree = rooms_in_tree(ROOT)
     assert set(documented) == set(tree), "rooms: " + str(set(documented) ^ set(tree))
-    for folder, modules in tree.items():
-        assert documented[folder] == modules, (
+    for folder, names in tree.items():
+        assert documented[folder] == names, (
             folder,
-            "not documented: " + ", ".join(sorted(modules - documented[folder])),
-            "documented, not there: " + ", ".join(sorted(documented[folder] - modules)),
+            "not documented: " + ", ".join(sorted(names - documented[folder])),
+            "documented, not there: " + ", ".join(sorted(documented[folder] - names)),
         )
 
 
