@@ -1,12 +1,14 @@
-"""Shared test set-up."""
+"""Shared test set-up; what the machine must have for a test (tests/capabilities.py)."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 
 import msgspec
 import pytest
 import structlog
+from capabilities import NO_OVERRIDE, in_ci, need, override_problem
 
 from kasparctl.body import build
 from kasparctl.body.api import Body
@@ -42,3 +44,30 @@ def still_body_unless_asked(request: pytest.FixtureRequest, monkeypatch: pytest.
 
     monkeypatch.setattr("kasparctl.sim.demo.make_body", still)
     monkeypatch.setattr("kasparctl.service.daemon.make_body", still)
+
+
+# -- what the machine has -------------------------------------------------------------
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
+    """Under CI=true a skipped test fails: CI's machine has all a test here can need
+    (tests/capabilities.py), so a skip there hides a missing install step."""
+    outcome = yield
+    report: pytest.TestReport = outcome.get_result()  # type: ignore[attr-defined]
+    if report.skipped and in_ci() and not hasattr(report, "wasxfail"):
+        longrepr = report.longrepr
+        reason = longrepr[2] if isinstance(longrepr, tuple) else str(longrepr)
+        report.outcome = "failed"
+        report.longrepr = f"a skip under CI=true is a failure (CI has what every test needs): {reason}"
+
+
+@pytest.fixture
+def without_override() -> list[str]:
+    """The prefix that runs a command as this user without power over file permissions:
+    as root, tests/capabilities.NO_OVERRIDE (skipped where it cannot take that power
+    away); as another user, none."""
+    if os.geteuid() != 0:
+        return []
+    need("root without its power over file permissions", override_problem())
+    return list(NO_OVERRIDE)

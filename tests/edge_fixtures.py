@@ -14,10 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-
-
-def in_ci() -> bool:
-    return os.environ.get("CI", "").lower() == "true"
+from capabilities import in_ci
 
 
 def mount_problem() -> str | None:

@@ -99,13 +99,15 @@ def test_say_into_a_missing_directory_is_one_line(tmp_path: Path) -> None:
 
 
 @pytest.mark.usefixtures("root")
-def test_a_state_directory_without_permission_is_one_line(tmp_path: Path) -> None:
+def test_a_state_directory_without_permission_is_one_line(
+    tmp_path: Path, without_override: list[str]
+) -> None:
     """As a user who may not enter the service's 0700 state directory (root without the
     capability to override permissions: as `kasparctl` without sudo)."""
     locked = tmp_path / "var-lib-kaspar"
     locked.mkdir(mode=0o700)
     os.chown(locked, 65534, 65534)
-    no_override = ["setpriv", "--bounding-set=-dac_override,-dac_read_search", "--"]
+    no_override = without_override
     for arguments, line in [
         (["demo", "--fast", "--state-dir", str(locked / "state")],
          f"error: {locked / 'state'}: cannot use the state directory: Permission denied"),

@@ -206,6 +206,20 @@ def test_batch_forms_agree_with_scalar_forms():
     assert list(batch_choices) == [choose(p, scalar_rng) for p in scalar]
 
 
+@pytest.mark.parametrize("labels", [2, 6, 7, 8, 9, 12])
+def test_batch_entropy_adds_in_the_scalar_order_at_any_width(labels):
+    """The same bits as entropy_bits wherever numpy's log2 is math.log2 (nearly every
+    number): numpy's own row sum is pairwise from eight labels on, another order."""
+    rng = np.random.default_rng(labels)
+    p = rng.dirichlet(np.full(labels, 0.5), size=400)
+    p[:, -1] = 0.0  # a label not offered
+    p /= p.sum(axis=1, keepdims=True)
+    same_log = np.array([[np.log2(v) == math.log2(v) for v in row if v > 0.0] for row in p])
+    rows = p[same_log.all(axis=1)]
+    assert len(rows) > 300
+    assert entropy_bits_batch(rows).tolist() == [entropy_bits(row) for row in rows]
+
+
 # --- properties ------------------------------------------------------------------------
 
 finite_q = st.floats(min_value=-1e308, max_value=1e308, allow_nan=False, allow_infinity=False)

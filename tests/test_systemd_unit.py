@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from capabilities import man_page_problem, need
+
 REPO = Path(__file__).resolve().parents[1]
 UNIT = REPO / "systemd" / "kasparctl.service"
 # systemd-analyze security rates the unit 0.7 ("SAFE"); a change that exposes more fails.
@@ -25,11 +27,24 @@ def unit_for_this_machine(tmp_path: Path) -> Path:
 
 def systemd_analyze() -> str:
     found = shutil.which("systemd-analyze")
-    assert found, "systemd-analyze is needed (Debian package systemd; .ci/run installs it)"
+    need("systemd-analyze", None if found else "not installed (Debian's systemd)")
+    assert found is not None
     return found
 
 
+def documentation_problem() -> str | None:
+    """Why man cannot show a page the unit's Documentation= names, or None: verify runs
+    `man` for each, and says so on stderr when one is missing."""
+    documentation = re.search(r"^Documentation=(.*)$", UNIT.read_text(), re.M)
+    assert documentation, "the unit has no Documentation="
+    for page, section in re.findall(r"man:([\w.@-]+)\((\w+)\)", documentation.group(1)):
+        if problem := man_page_problem(page, section):
+            return problem
+    return None
+
+
 def test_systemd_analyze_verify_says_nothing(tmp_path: Path) -> None:
+    need("the man pages of the unit's Documentation= (man-db)", documentation_problem())
     # verify exits 0 even on unknown keys, so its stderr is the verdict.
     result = subprocess.run(
         [systemd_analyze(), "verify", str(unit_for_this_machine(tmp_path))],

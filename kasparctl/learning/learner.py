@@ -101,6 +101,8 @@ def softmax(q_row: FloatArray, beta: float, candidates: BoolArray | None = None)
     Q is shifted by its largest candidate value before scaling, so no Q
     magnitude overflows: every exponent is <= 0 and the best candidate's is 0.
     The arithmetic is the batch form's, step for step, so both give the same bits.
+    The normaliser is numpy's sum, in numpy's order whatever the Python (left to
+    right below eight labels, pairwise from eight on), as the batch form's rows.
     """
     q = np.asarray(q_row, dtype=np.float64)
     values = q.tolist()
@@ -136,14 +138,30 @@ _SAFE_EXPONENT = 700.0
 
 
 def entropy_bits(probabilities: FloatArray) -> float:
-    """Eq. 3 in bits; zero probabilities (non-candidates) contribute nothing."""
-    values: list[float] = probabilities.tolist()
-    total = -sum(p * math.log2(p) for p in values if p > 0.0)
-    return max(0.0, total)
+    """Eq. 3 in bits; zero probabilities (non-candidates) contribute nothing.
+
+    The terms are added one by one, left to right, in plain floating point: the
+    entropy is in every question and trial record and picks the band Kaspar says,
+    so its bits must not depend on the Python that runs the game. The built-in
+    sum() adds floats with compensation from Python 3.12 on (other last bits than
+    3.11's), and math.fsum rounds the exact sum (other bits than either); this loop
+    is what 3.11's sum() did, so sessions recorded on 3.11 replay bit for bit.
+    entropy_bits_batch adds in the same order, so the simulator's entropies are
+    the game's.
+    """
+    total = 0.0
+    for p in probabilities.tolist():
+        if p > 0.0:
+            total += p * math.log2(p)
+    return max(0.0, -total)
 
 
 def choose(probabilities: FloatArray, rng: np.random.Generator) -> int:
-    """Draw one action; an action of probability 0 is never drawn."""
+    """Draw one action; an action of probability 0 is never drawn.
+
+    The cumulative sum is plain additions left to right on every Python (as
+    choose_batch's cumsum), never the built-in sum().
+    """
     values = probabilities.tolist()
     cumulative = list(itertools.accumulate(values))
     index = bisect.bisect_right(cumulative, rng.random() * cumulative[-1])
@@ -199,10 +217,18 @@ def softmax_batch(
 
 
 def entropy_bits_batch(probabilities: FloatArray) -> FloatArray:
-    """Eq. 3 in bits for each row of probabilities."""
+    """Eq. 3 in bits for each row of probabilities, added in entropy_bits' order.
+
+    Column by column, left to right: numpy's own sum along a row is that order
+    only below eight labels (pairwise from eight on), where a row would then
+    differ from the game's entropy in its last bits.
+    """
     with np.errstate(divide="ignore", invalid="ignore"):
         terms = np.where(probabilities > 0.0, probabilities * np.log2(probabilities), 0.0)
-    entropies: FloatArray = np.maximum(0.0, -terms.sum(axis=1))
+    total = np.zeros(terms.shape[0])
+    for column in terms.T:
+        total += column
+    entropies: FloatArray = np.maximum(0.0, -total)
     return entropies
 
 

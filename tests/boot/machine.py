@@ -11,7 +11,10 @@ Three layers, each cached or torn down on its own:
   school's mirror;
 - the wheelhouse, CACHE/wheels-KEY: the project's dependencies and its build backend as
   wheels for the container's Python, keyed by pyproject.toml's requirements (pip in the
-  container reads it through PIP_NO_INDEX and PIP_FIND_LINKS, nothing else changes);
+  container reads it through PIP_NO_INDEX and PIP_FIND_LINKS, nothing else changes).
+  This Python builds them where it is the container's version (Debian 12's 3.11); on a
+  host of another (Debian 13's 3.13) the container's own Python does, in a throwaway
+  overlay of the base tree;
 - a Machine per run: an overlay over the base tree in its own CACHE/runs/NAME, booted by
   systemd-nspawn and entered with nsenter, always shut down, unmounted and removed. A run
   killed before it could clean up (SIGKILL) is cleaned up by the next one.
@@ -51,6 +54,8 @@ HOST_TOOLS = {
 }
 DEBS_IN_CONTAINER = "/var/cache/kaspar-debs"
 WHEELS_IN_CONTAINER = "/var/cache/kaspar-wheels"
+# What the tree's own Python needs to build the wheelhouse (install.sh installs them too).
+WHEEL_BUILDER_PACKAGES = ("python3-venv", "python3-dev", "gcc", "libc6-dev")
 CONTAINER_PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
 # --system-call-filter=bpf lets the container's systemd load the BPF device
 # programs behind DevicePolicy=; without it the policy could not be enforced.
@@ -296,19 +301,70 @@ def wheels_name(requirements: Sequence[str], python: tuple[int, int]) -> str:
     return f"wheels-{_key(sorted(requirements), python, os.uname().machine)}"
 
 
-def build_wheels(work: Path, requirements: Sequence[str], python: tuple[int, int]) -> None:
-    """Wheels of `requirements` for the container, built by this Python (the same version)."""
-    if sys.version_info[:2] != python:
-        raise BootError(
-            f"the container's Python is {python[0]}.{python[1]} but this is "
-            f"{sys.version_info[0]}.{sys.version_info[1]}: its wheels would not install there; "
-            f"run the test from a venv of Python {python[0]}.{python[1]} (Debian 12's python3)"
+def build_wheels(
+    work: Path, requirements: Sequence[str], python: tuple[int, int], base: Path
+) -> None:
+    """Wheels of `requirements` for the container's Python: built by this Python where it
+    is the same version, else by the container's own (a host of another Debian)."""
+    if sys.version_info[:2] == python:
+        _run(
+            [sys.executable, "-m", "pip", "wheel", "--quiet", "--wheel-dir", work, *requirements],
+            "building the wheelhouse",
+            timeout=1800,
         )
-    _run(
-        [sys.executable, "-m", "pip", "wheel", "--quiet", "--wheel-dir", work, *requirements],
-        "building the wheelhouse",
-        timeout=1800,
-    )
+    else:
+        _build_wheels_in_tree(work, requirements, base)
+
+
+def _build_wheels_in_tree(work: Path, requirements: Sequence[str], base: Path) -> None:
+    """pip wheel run by the base tree's own Python, in a throwaway overlay of the tree.
+
+    The Python, its headers and a compiler (python-evdev has no wheels) come from the
+    tree's local repository, as install.sh takes them; pip reaches the network through
+    this machine's, as debootstrap did. Nothing of it is left in the base tree.
+    """
+    scratch = CACHE / f".wheels-{secrets.token_hex(4)}"
+    root = scratch / "root"
+    try:
+        for part in ("upper", "work", "root"):
+            (scratch / part).mkdir(parents=True)
+        _run(
+            ["mount", "-t", "overlay", "overlay", "-o",
+             f"lowerdir={base / 'root'},upperdir={scratch / 'upper'},workdir={scratch / 'work'}",
+             root],
+            "mounting an overlay of the base tree for pip",
+            timeout=60,
+        )  # fmt: skip
+        _run(["mount", "-t", "proc", "proc", root / "proc"], "mounting /proc", timeout=60)
+        for host, inside in ((base / "debs", DEBS_IN_CONTAINER), (work, WHEELS_IN_CONTAINER)):
+            (root / inside.lstrip("/")).mkdir(parents=True, exist_ok=True)
+            _run(["mount", "--bind", host, root / inside.lstrip("/")], f"binding {host}", timeout=60)
+        env = {"PATH": CONTAINER_PATH, "DEBIAN_FRONTEND": "noninteractive", "LANG": "C.UTF-8",
+               "HOME": "/root"}  # fmt: skip
+        # A network whose TLS is re-signed by its own authority: pip's file of it goes in too.
+        if (cert := os.environ.get("PIP_CERT")) and Path(cert).is_file():
+            shutil.copyfile(cert, root / "etc/pip-cert.pem")
+            env["PIP_CERT"] = "/etc/pip-cert.pem"
+        _run(["chroot", root, "apt-get", "update", "-qq"], "apt-get update in the overlay",
+             env=env, timeout=600)  # fmt: skip
+        _run(
+            ["chroot", root, "apt-get", "install", "-y", "-qq", "--no-install-recommends",
+             *WHEEL_BUILDER_PACKAGES],
+            "installing the tree's Python and compiler in the overlay",
+            env=env,
+            timeout=1800,
+        )  # fmt: skip
+        _run(["chroot", root, "python3", "-m", "venv", "/opt/wheel-builder"],
+             "a venv of the tree's Python", env=env, timeout=600)  # fmt: skip
+        _run(
+            ["chroot", root, "/opt/wheel-builder/bin/pip", "wheel", "--quiet",
+             "--disable-pip-version-check", "--wheel-dir", WHEELS_IN_CONTAINER, *requirements],
+            "building the wheelhouse with the tree's Python",
+            env=env,
+            timeout=1800,
+        )  # fmt: skip
+    finally:
+        _remove(scratch)
 
 
 # -- a booted machine ------------------------------------------------------------------------

@@ -20,6 +20,7 @@ from boot.machine import BootError, Machine
 UNIT = "kasparctl.service"
 UNIT_FILE = "/etc/systemd/system/kasparctl.service"
 KEYS_FIFO = "/run/kaspar-keys"
+TUN = "/dev/net/tun"  # a device the container has and the unit's DeviceAllow= does not
 # The test's changes to the installed service: simulated hardware, and the keyfob's
 # keys read from a fifo the test writes into (kaspar-keys.service holds it open, so
 # that neither the service's open nor the test's write ever waits for the other).
@@ -204,6 +205,25 @@ class Robot:
             value = re.sub(r"/run/kaspar(?=[\s/]|$)", f"/run/{runtime_directory}", value)
             options += ["-p", f"{key}={value}"]
         return options
+
+    def device_policy_problem(self) -> str | None:
+        """Why this machine's systemd does not enforce DevicePolicy=, or None.
+
+        The control of the unit's own check: a transient unit with DevicePolicy=closed
+        and nothing else, as root, opens /dev/net/tun (systemd-nspawn makes it). Where
+        its systemd cannot attach the device filter (a container inside a container),
+        systemd starts the unit all the same, and the device opens.
+        """
+        if self.machine.run(["test", "-c", TUN], check=False).returncode != 0:
+            return f"no {TUN} in the container to try the policy on"
+        result = self.machine.run(
+            ["systemd-run", "--quiet", "--wait", "--pipe", "--collect",
+             "-p", "DevicePolicy=closed", "--", "sh", "-c", f"exec 3<>{TUN}"],
+            check=False,
+        )  # fmt: skip
+        if result.returncode == 0:
+            return f"a unit with DevicePolicy=closed and nothing else opened {TUN} as root"
+        return None
 
     def probe(
         self, argv: Sequence[str], runtime_directory: str = "kaspar-probe", timeout: float = 60.0
