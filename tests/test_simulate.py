@@ -481,3 +481,22 @@ def test_a_bad_config_file_is_reported_on_stderr(tmp_path):
     assert err.startswith("error: ") and "locatoins" in err
     code, _, err = _run("--config", str(tmp_path / "missing.toml"))
     assert code == 1 and "missing.toml" in err
+
+
+def test_the_first_guess_on_a_re_opened_target_follows_no_answer_as_the_records_read():
+    """game.fold: a re-opened target's next guess follows nothing (no win-shift from the
+    green that taught the wrong name); the simulator counts as the report does."""
+    game = pilot_game()
+    teacher = Teacher(p_wrong_green=0.3, p_wrong_red=0.05)
+    rng = np.random.default_rng(11)
+    reopened_problems = 0
+    for group in range(200):
+        for problem in simulate_group(game, PAPER, teacher, rng, group, recover=True):
+            explicit = [i for i, t in enumerate(problem.trials) if t.win_shift is not None]
+            assert len(explicit) == problem.reopened
+            for index in explicit:
+                trial, before = problem.trials[index], problem.trials[index - 1]
+                assert (trial.perseverative, trial.win_shift) == (False, False)
+                assert before.feedback is True  # the green that taught the name re-opened
+            reopened_problems += problem.reopened > 0
+    assert reopened_problems > 10

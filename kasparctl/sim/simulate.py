@@ -127,6 +127,7 @@ def simulate_group(
     first_offered: list[int] = [0] * n_targets
     last_candidates: list[BoolArray] = [offered.copy() for _ in range(n_targets)]
     doubt = _Doubt(n_targets)
+    fresh = [False] * n_targets  # re-opened, not yet asked again
     target: int | None = 0
     while target is not None:
         progress = progresses[target]
@@ -153,12 +154,21 @@ def simulate_group(
                     else _next_state(target, progress.done, n_targets)
                 )
                 table = update(table, target, choice, params.reward(feedback), params, next_state)
-            trials[target].append(TrialRecord(choice, feedback, entropy, correct))
+            if fresh[target]:
+                # The first guess on a re-opened target follows no answer (game.fold).
+                fresh[target] = False
+                trial = TrialRecord(choice, feedback, entropy, correct, False, False)
+            else:
+                trial = TrialRecord(choice, feedback, entropy, correct)
+            trials[target].append(trial)
             confused = recover and doubt.answered(target, choice, feedback, progresses, offered)
             # The game takes no re-open once every target is done: the guessing is over.
             open_left = not all(p.done for p in progresses)
+            before = list(doubt.reopened)
             if confused and open_left and doubt.reopen(progresses, offered, answers):
                 candidates = offered.copy()
+                for index, count in enumerate(doubt.reopened):
+                    fresh[index] = fresh[index] or count > before[index]
         last_candidates[target] = candidates
         if progress.learned is not None:
             doubt.learned(target)
