@@ -49,9 +49,10 @@ class RecordingBody:
         self._note("close")
         self.cancel()
 
-    def set_alive(self, alive: bool) -> None:
+    def set_alive(self, alive: bool, *, blinking: bool = False) -> None:
         self._note("set_alive", alive)
         self.alive = alive
+        self.blinking = alive or blinking
 
     def look_at(self, gaze: Gaze) -> None:
         self._note("look_at", gaze)

@@ -79,6 +79,29 @@ def test_the_mouth_says_the_uncertainty_line_while_the_arm_points(capsys, tmp_pa
     assert {row.source for row in point if row.joint in ARM} == {"point"}
 
 
+
+def points(rows: list[Row]) -> list[tuple[float, float]]:
+    """Every point's first and last goal times (its goals come 20 ms apart)."""
+    times = [row.time for row in rows if row.source == "point"]
+    spans, begin = [], times[0]
+    for before, after in itertools.pairwise(times):
+        if after - before > 0.5:
+            spans.append((begin, before))
+            begin = after
+    return [*spans, (begin, times[-1])]
+
+
+def test_the_eyelids_blink_on_while_the_arm_points_and_the_head_holds_the_bag(capsys, tmp_path):
+    rows, _ = demo_with_motion(capsys, tmp_path)
+    spans = points(rows)
+    assert len(spans) >= 15
+    # From the point's first goal on (a body tick at that very moment came before it).
+    during = [row for row in rows if any(a < row.time <= b for a, b in spans)]
+    blinks = {round(row.time) for row in during if row.source == "blink"}
+    assert len(blinks) >= 3  # blinks fall in several points, at the body's own rate
+    # No idle movement of the head meanwhile: it holds the bag Kaspar looked at.
+    assert not [row for row in during if row.source == "idle"]
+
 def test_every_goal_of_a_game_is_in_range_and_within_the_speed_limits(capsys, tmp_path):
     rows, _ = demo_with_motion(capsys, tmp_path, "--uncertainty", "both")
     joints = {joint.name: joint for joint in CONFIG.servos.joints}

@@ -41,9 +41,10 @@ class Body(Protocol):
         """Cancel every behaviour and stop the loop; idempotent."""
         ...
 
-    def set_alive(self, alive: bool) -> None:
+    def set_alive(self, alive: bool, *, blinking: bool = False) -> None:
         """Allow or forbid blinks, idle movements and gaze (forbidden while the arm is
-        limp for teaching and while pointing)."""
+        limp for teaching); `blinking` keeps the blinks of a body otherwise still (while
+        pointing: the head stays on the bag, the eyelids go on)."""
         ...
 
     def look_at(self, gaze: Gaze) -> None:
@@ -72,7 +73,7 @@ class StillBody:
     async def close(self) -> None:
         """Nothing to close."""
 
-    def set_alive(self, alive: bool) -> None:
+    def set_alive(self, alive: bool, *, blinking: bool = False) -> None:
         """Nothing comes alive."""
 
     def look_at(self, gaze: Gaze) -> None:

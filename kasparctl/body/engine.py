@@ -127,6 +127,7 @@ class LiveBody:
         self.mouth.on_news = self._poke
         self._wake = asyncio.Event()
         self._alive = False
+        self._blinking = False  # blinks on in a body otherwise still (pointing)
         self._gesture: _Playback | None = None
         self._blink: _Playback | None = None
         self._idle: _Playback | None = None
@@ -170,18 +171,21 @@ class LiveBody:
                 await task
         self._alarm.close()
 
-    def set_alive(self, alive: bool) -> None:
+    def set_alive(self, alive: bool, *, blinking: bool = False) -> None:
         """Allow or forbid blinks, idle movements and gaze shifts.
 
-        Forbidden, blinks and idle movements end at once and no gaze is taken; the gaze
-        asked last still turns the head there and holds it (the game looks at the bag,
-        then keeps still while the arm points: the move claims only the arm).
+        Forbidden, idle movements end at once and no gaze is taken, and blinks too unless
+        `blinking`; the gaze asked last still turns the head there and holds it (the game
+        looks at the bag, then keeps the head still while the arm points, the eyelids
+        blinking on: the move claims only the arm).
         """
         self._alive = alive
+        self._blinking = alive or blinking
         if not alive:
-            self._blink = self._idle = None
-            self._next_blink = self._next_idle = None
-        else:
+            self._idle = self._next_idle = None
+        if not self._blinking:
+            self._blink = self._next_blink = None
+        if self._blinking:
             self._poke()
 
     def look_at(self, gaze: Gaze) -> None:
@@ -227,7 +231,7 @@ class LiveBody:
         if self._gesture is not None:
             self._gesture.finish()
         self._gesture = self._blink = self._idle = self._gaze = None
-        self._alive = False
+        self._alive = self._blinking = False
         self._next_blink = self._next_idle = None
         self.mouth.silence()
         # Every joint is home where it stands: not even the way home is sent after a cancel.
@@ -271,9 +275,8 @@ class LiveBody:
 
     def _next_life(self) -> float | None:
         """When the next blink or idle movement is due, if Kaspar is alive."""
-        if not self._alive:
-            return None
-        due = [t for t in (self._next_blink, self._next_idle) if t is not None]
+        allowed = ((self._next_blink, self._blinking), (self._next_idle, self._alive))
+        due = [moment for moment, allowed_now in allowed if moment is not None and allowed_now]
         return min(due) if due else None
 
     async def _rest_until(self, moment: float | None) -> None:
@@ -319,7 +322,7 @@ class LiveBody:
         layers = self.layers
         layers.clear()
         self._gaze_layer(now, held, out)
-        if self._alive:
+        if self._blinking:
             self._schedule_life(now)
             if self._idle is not None:
                 self._idle = self._additive(self._idle, now, home, out)
@@ -380,13 +383,13 @@ class LiveBody:
         settings = self._settings
         if self._next_blink is None:
             self._next_blink = now + self._rng.uniform(*settings.blink_interval_s)
-        if self._next_idle is None:
+        if self._next_idle is None and self._alive:
             self._next_idle = now + self._rng.uniform(*settings.idle_interval_s)
         if now >= self._next_blink:
             self._next_blink = None
             if self._blink is None and BLINK in self._library:
                 self._blink = _Playback(self._library[BLINK], 1.0, BLINK_LAYER)
-        if now >= self._next_idle:
+        if self._next_idle is not None and now >= self._next_idle:
             self._next_idle = None
             if self._idle is None and IDLE in self._library and settings.idle_amplitude > 0:
                 self._idle = _Playback(self._library[IDLE], settings.idle_amplitude, IDLE_LAYER)

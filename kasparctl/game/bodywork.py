@@ -128,7 +128,7 @@ class BodyWork:
         self.body: Body = body if body is not None else StillBody()
         self._plan = plan
         self._tell = tell
-        self._alive: bool | None = None
+        self._alive: tuple[bool, bool] | None = None  # (alive, blinking) as last asked
         # A cancel stilled the body: the next set_alive reaches it whatever it says.
         self._stilled = False
 
@@ -151,16 +151,17 @@ class BodyWork:
             return None
         return normalised_entropy(entropy_bits, candidates)
 
-    def set_alive(self, alive: bool) -> None:
-        """Allow or forbid blinks, idle movements and gaze (never while the plan says no)."""
-        wanted = alive and self.lively
+    def set_alive(self, alive: bool, *, blinking: bool = False) -> None:
+        """Allow or forbid blinks, idle movements and gaze (never while the plan says no);
+        `blinking` keeps the blinks of a body otherwise still (Body.set_alive)."""
+        wanted = (alive and self.lively, (alive or blinking) and self.lively)
         if wanted == self._alive and not self._stilled:
             return
         self._stilled = False
-        self.body.set_alive(wanted)
-        if wanted != self._alive:
-            self._alive = wanted
-            self._tell({"kind": "alive", "alive": wanted})
+        self.body.set_alive(wanted[0], blinking=wanted[1])
+        if self._alive is None or wanted[0] != self._alive[0]:
+            self._tell({"kind": "alive", "alive": wanted[0]})
+        self._alive = wanted
 
     def look_at(self, kind: GazeKind, index: int = 0, name: str = "") -> None:
         """Turn to `kind` (its `index`, called `name` in the transcript), where gaze is on."""

@@ -129,7 +129,8 @@ class StepContext:
         if pose:
             self.emit(GameEvent.POINT, target=target_name, style=style.words)
             self.body.look_at(GazeKind.BAG, target, target_name)
-            self.body.set_alive(False)  # the head stays on the bag while the arm moves
+            # The head stays on the bag while the arm moves; the eyelids blink on.
+            self.body.set_alive(False, blinking=True)
             try:
                 await point(self.servos, pose, style)
             finally:
