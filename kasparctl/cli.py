@@ -45,8 +45,9 @@ COMMAND_MODULES = (
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The parser of every subcommand, each registered by its module."""
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every subcommand, each registered by its module; with `only` (a
+    subcommand's name), of that one alone, so a command imports only what it runs."""
     parser = Parser(
         prog="kasparctl", description="Controller of the Kaspar robot and its teaching game."
     )
@@ -57,9 +58,21 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"show the traceback of a failure (also with {DEBUG_ENV}=1)",
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMAND_MODULES:
+    chosen = [module for module in COMMAND_MODULES if _subcommand(module) == only]
+    for name in chosen or COMMAND_MODULES:
         importlib.import_module(f"kasparctl.commands.{name}").register(subparsers)
     return parser
+
+
+def _subcommand(module: str) -> str:
+    """The subcommand a module registers: its name, with dashes (fit_teacher: fit-teacher)."""
+    return module.replace("_", "-")
+
+
+def _chosen(argv: Sequence[str]) -> str | None:
+    """The subcommand named on the line: the first word that is not an option (the
+    options before it, --debug and --version, take no value)."""
+    return next((word for word in argv if not word.startswith("-")), None)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -69,7 +82,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     A bad argument found while parsing exits 2 here, in one line (SystemExit, as
     argparse's --help and --version exit 0).
     """
-    arguments = build_parser().parse_args(argv)
+    words = sys.argv[1:] if argv is None else list(argv)
+    # Importing every subcommand's room costs more than most commands do: a line that
+    # names one builds that one's parser (an unknown name, or none, gets them all).
+    arguments = build_parser(_chosen(words)).parse_args(words)
     debug = arguments.debug or os.environ.get(DEBUG_ENV, "") not in ("", "0")
     try:
         return int(arguments.run(arguments))

@@ -333,3 +333,35 @@ def test_every_exception_class_of_the_project_derives_from_the_one_base() -> Non
     # The learner imports nothing of the project (docs/architecture.md); where a person's
     # value reaches it, the room that passed it turns a LearnerError into its own error.
     assert outside == ["kasparctl.learning.learner.LearnerError"]
+
+
+@pytest.mark.parametrize("line", [["sessions", "--help"], ["--debug", "sessions", "--help"]])
+def test_a_subcommand_named_on_the_line_imports_no_other_subcommand(line: list[str]) -> None:
+    """A command pays only for its own room: `sessions` starts without the game's demo."""
+    import subprocess
+    import sys
+
+    probe = (
+        "import sys; from kasparctl import cli\n"
+        f"try: cli.main({line!r})\n"
+        "except SystemExit: pass\n"
+        "print(sorted(m for m in sys.modules if m.startswith('kasparctl.commands.')))"
+    )
+    shown = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=REPO
+    ).stdout.splitlines()[-1]
+    assert "kasparctl.commands.sessions" in shown
+    others = {f"kasparctl.commands.{m}" for m in cli.COMMAND_MODULES} - {
+        "kasparctl.commands.sessions"
+    }
+    assert not [m for m in others if f"'{m}'" in shown], shown
+
+
+def test_a_line_naming_no_known_subcommand_is_told_every_one(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    with pytest.raises(SystemExit) as exited:
+        cli.main(["frob"])
+    assert exited.value.code == 2
+    said = capsys.readouterr().err
+    assert all(cli._subcommand(m) in said for m in cli.COMMAND_MODULES), said
