@@ -16,6 +16,13 @@ One arbiter of motion (hal.servos.claims): a move claims only the joints it move
 as long as it runs; stream steps go on for every other joint (the mouth while the arm
 points) and are dropped for the claimed ones; set_compliant and rest claim the joints
 they touch. Every goal, by any path, is told to the goal listeners (on_goals).
+
+Virtual joints and couplings (ServoSettings.realise): a pose may name a virtual joint
+(eyes_yaw) for the real joints it drives, and a joint that follows another (a lid
+following its eyeball's pitch) moves with its leader. A move or stream claims, clamps
+and speed-limits the real joints, followers included; commanded() and a stream's
+return give a follower's own value (its goal without its leader's share), the value a
+caller asks for.
 """
 
 from __future__ import annotations
@@ -36,6 +43,7 @@ from hal.errors import (
     RepeatFilter,
     ServoFaultError,
     ServoSilent,
+    SettingsError,
     UnknownJoint,
     UnsafeCommand,
 )
@@ -266,9 +274,7 @@ class Joints:
         profile takes at least `duration` seconds; its goals are told as `source`.
         Raises UnknownJoint, UnsafeCommand or ServoFaultError.
         """
-        unknown = [name for name in pose if name not in self._joints]
-        if unknown:
-            raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
+        pose = self._realise(pose)
         if duration is not None and not (duration >= 0 and math.isfinite(duration)):
             raise UnsafeCommand(f"duration must be a finite number >= 0, found {duration}")
         if speed is not None and not (speed > 0 and math.isfinite(speed)):
@@ -287,11 +293,12 @@ class Joints:
             await self._run_profile(joints, targets, duration, speed, source)
 
     def commanded(self) -> dict[str, float]:
-        """The last goal of every joint whose torque is on (where it is being held), in degrees."""
-        return {
+        """The last goal of every joint whose torque is on (where it is being held), in degrees
+        (a follower's own value, without its leader's share)."""
+        return self._own_values({
             name: j.commanded for name, j in self._joints.items()
             if j.torque is True and j.commanded is not None
-        }
+        })
 
     async def stream(
         self, pose: Pose, period: float, sources: Mapping[str, str] | None = None
@@ -309,9 +316,7 @@ class Joints:
         Raises UnknownJoint, UnsafeCommand (NaN target, bad period) and
         ServoFaultError while a fault is latched (or one is latched by this write).
         """
-        unknown = [name for name in pose if name not in self._joints]
-        if unknown:
-            raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
+        pose = self._realise(pose)
         if not (period > 0 and math.isfinite(period)):
             raise UnsafeCommand(f"period must be a finite number > 0, found {period}")
         self._refuse_if_faulted()
@@ -346,7 +351,38 @@ class Joints:
                     sources,
                     STREAM,
                 )
-        return sent
+        return self._own_values(sent)
+
+    def _realise(self, pose: Pose) -> dict[str, float]:
+        """`pose` as the real joints' goals (virtual joints expanded, followers moved)."""
+        virtual = self.settings.virtual
+        unknown = [name for name in pose if name not in self._joints and name not in virtual]
+        if unknown:
+            raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
+        if not virtual and not self.settings.couplings:
+            return dict(pose)
+        for name, degrees in pose.items():
+            if not math.isfinite(degrees):
+                raise UnsafeCommand(f"{name}: target {degrees} is not a number")
+        where = self._own_values(
+            {n: j.commanded for n, j in self._joints.items() if j.commanded is not None}
+        )
+        try:
+            return self.settings.realise(pose, where)
+        except SettingsError as error:
+            raise UnsafeCommand(str(error)) from None
+
+    def _own_values(self, goals: dict[str, float]) -> dict[str, float]:
+        """`goals` with each follower's value less its leader's share (what was asked)."""
+        for coupling in self.settings.couplings:
+            if coupling.joint not in goals:
+                continue
+            leader = self._joints[coupling.follows]
+            if leader.commanded is None:
+                continue
+            share = coupling.ratio * (leader.commanded - leader.settings.rest_deg)
+            goals[coupling.joint] = goals[coupling.joint] - share
+        return goals
 
     async def set_compliant(self, group: str, compliant: bool) -> None:
         """Torque off for `group` (or one joint), or back on holding where each joint is.
