@@ -160,6 +160,9 @@ class Joints:
         self._retried_seen: dict[str, int] = {}  # bus name -> replies retried, as last logged
         self._bits: dict[tuple[str, str], int] = {}  # (joint, error bit) -> polls seen in a row
         self.step = 1.0 / settings.control_hz
+        # Each coupled joint's own value, as last asked (ServoSettings.realise adds its
+        # leader's share): a lid keeps it while its eye moves.
+        self._own: dict[str, float] = {}
 
     @classmethod
     def from_settings(cls, settings: ServoSettings, clock: Clock) -> Joints:
@@ -364,24 +367,39 @@ class Joints:
         for name, degrees in pose.items():
             if not math.isfinite(degrees):
                 raise UnsafeCommand(f"{name}: target {degrees} is not a number")
+        try:
+            expanded = self.settings.expand(pose)
+        except SettingsError as error:
+            raise UnsafeCommand(str(error)) from None
+        for coupling in self.settings.couplings:
+            if coupling.joint in expanded:
+                # Its own value, as asked (within its range): what it keeps when only its
+                # leader moves, and what commanded() gives.
+                self._own[coupling.joint] = self._joints[coupling.joint].clamp(
+                    expanded[coupling.joint])
         where = self._own_values(
             {n: j.commanded for n, j in self._joints.items() if j.commanded is not None}
         )
-        try:
-            return self.settings.realise(pose, where)
-        except SettingsError as error:
-            raise UnsafeCommand(str(error)) from None
+        for coupling in self.settings.couplings:
+            if coupling.follows in expanded and coupling.joint in where:
+                # From here on its own value is kept, not re-read through a clamped goal.
+                self._own.setdefault(coupling.joint, where[coupling.joint])
+        return self.settings.realise(pose, where)
 
     def _own_values(self, goals: dict[str, float]) -> dict[str, float]:
-        """`goals` with each follower's value less its leader's share (what was asked)."""
+        """`goals` with each follower's own value (its goal without its leader's share)."""
         for coupling in self.settings.couplings:
             if coupling.joint not in goals:
                 continue
-            leader = self._joints[coupling.follows]
-            if leader.commanded is None:
-                continue
-            share = coupling.ratio * (leader.commanded - leader.settings.rest_deg)
-            goals[coupling.joint] = goals[coupling.joint] - share
+            own = self._own.get(coupling.joint)
+            if own is None:
+                # Never asked: what it was found at, less its leader's share.
+                leader = self._joints[coupling.follows]
+                if leader.commanded is None:
+                    continue
+                own = goals[coupling.joint] - coupling.ratio * (
+                    leader.commanded - leader.settings.rest_deg)
+            goals[coupling.joint] = own
         return goals
 
     async def set_compliant(self, group: str, compliant: bool) -> None:
