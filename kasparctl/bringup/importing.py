@@ -317,7 +317,7 @@ def _sequence(
             return
         pose_where, converted = found
         if converted is None:
-            notes.append(f"{where}: step {number} is {pose_where}, not imported (above): "
+            notes.append(f"{where}: step {number} is {pose_where}, refused above: "
                          "not imported")
             return
         steps.append((converted, step.delay_ms))
