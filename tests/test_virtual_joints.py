@@ -133,3 +133,46 @@ async def test_a_stream_on_a_virtual_joint_moves_both_and_a_lid_with_its_eye():
         await servos.stream({"eyelids": 1.0, "left_eyelid": 2.0}, 0.02)
     with pytest.raises(UnknownJoint, match="eyelid"):
         await servos.stream({"eyelid": 1.0}, 0.02)
+
+
+def test_behaviour_check_adds_a_leader_s_share_to_its_follower():
+    from pathlib import Path
+
+    from kasparctl.body.behaviours import parse
+    from kasparctl.body.check import problems
+    from kasparctl.config import load_config
+
+    kaspar_3 = load_config(Path(__file__).resolve().parent.parent / "systemd" / "kaspar-3.toml")
+    # The eyes 6 down open each lid 6 (ratio -1): closing it only 5 ends it past open.
+    text = ("[sulk]\nkeyframes = [{ time = 0.8, pose = { eyes_pitch = 6.0, eyelids = 5.0 } }]\n"
+            "[fine]\nkeyframes = [{ time = 0.8, pose = { eyes_pitch = 6.0, eyelids = 8.0 } }]\n"
+            "[twice]\nkeyframes = [{ time = 0.8, pose = { eyelids = 6.0, left_eyelid = 1.0 } }]\n")
+    found = problems(parse(text, "mine.toml"), kaspar_3.servos)
+    assert [line.split(": ")[1].split(",")[0] for line in found] == [
+        "behaviour 'sulk'", "behaviour 'sulk'", "behaviour 'twice'"]
+    assert ("joint right_eyelid (following right_eye_pitch), at 0.80 s: would be clamped: "
+            "-1 deg, outside its safe range [0, 30]") in found[0]
+    assert "joint left_eyelid is set twice, by eyelids and by left_eyelid" in found[2]
+
+
+async def test_gaze_may_name_a_virtual_joint_and_moves_both_eyes():
+    import random
+
+    from kasparctl.body.api import Gaze, GazeKind
+    from kasparctl.body.behaviours import load_library
+    from kasparctl.body.engine import LiveBody
+    from kasparctl.config import BodySettings, GazeSettings
+
+    servos, clock = await _powered()
+    body = BodySettings(enabled=True, mouth_joint="", idle_amplitude=0.0,
+                        blink_interval_s=(60.0, 60.0),
+                        gaze=GazeSettings(children=({"eyes_pitch": 10.0},)))
+    live = LiveBody(servos, body, servos.settings, load_library(), clock, rng=random.Random(1))
+    live.set_alive(True)
+    live.look_at(Gaze(GazeKind.CHILD, 0))
+    for _ in range(100):
+        clock.t += live.period
+        await live.step(clock.now())
+    held = servos.commanded()
+    assert held["right_eye_pitch"] == pytest.approx(10.0)
+    assert held["left_eye_pitch"] == pytest.approx(10.0)

@@ -99,7 +99,9 @@ def _coupled(behaviour: Behaviour, servos: ServoSettings, where: str) -> list[st
     found: list[str] = []
     steps = max(1, round(behaviour.duration / SAMPLE_S))
     previous: dict[str, float] = {}
-    reported: set[tuple[str, str]] = set()
+    # The worst excess of each follower past its range, and its fastest speed: (amount, at).
+    worst: dict[str, tuple[float, float, float]] = {}
+    fastest: dict[str, tuple[float, float]] = {}
     for step in range(steps + 1):
         time = behaviour.duration * step / steps
         offsets = behaviour.offsets(time)
@@ -107,19 +109,26 @@ def _coupled(behaviour: Behaviour, servos: ServoSettings, where: str) -> list[st
         goals = servos.realise(pose, rests)
         for coupling in followers:
             name = coupling.joint
-            joint = joints[name]
-            value = goals.get(name, joint.rest_deg)
-            low, high = joint.range_deg
-            what = f"{where}, at {time:.2f} s, joint {name} (following {coupling.follows})"
-            if not low - 1e-6 <= value <= high + 1e-6 and (name, "range") not in reported:
-                reported.add((name, "range"))
-                found.append(f"{what}: would be clamped: {value:.3g} deg, outside its safe "
-                             f"range [{low:g}, {high:g}]")
+            value = goals.get(name, joints[name].rest_deg)
+            low, high = joints[name].range_deg
+            excess = max(low - value, value - high)
+            if excess > 1e-6 and excess > worst.get(name, (0.0, 0.0, 0.0))[0]:
+                worst[name] = (excess, time, value)
             if name in previous and step:
                 speed = abs(value - previous[name]) / (behaviour.duration / steps)
-                if speed > joint.max_speed_dps + 1e-6 and (name, "speed") not in reported:
-                    reported.add((name, "speed"))
-                    found.append(f"{what}: too fast: {speed:.0f} deg/s, above its limit of "
-                                 f"{joint.max_speed_dps:g} deg/s")
+                if speed > fastest.get(name, (0.0, 0.0))[0]:
+                    fastest[name] = (speed, time)
             previous[name] = value
+    for coupling in followers:
+        name, joint = coupling.joint, joints[coupling.joint]
+        what = f"{where}, joint {name} (following {coupling.follows})"
+        if name in worst:
+            _, time, value = worst[name]
+            low, high = joint.range_deg
+            found.append(f"{what}, at {time:.2f} s: would be clamped: {value:.3g} deg, "
+                         f"outside its safe range [{low:g}, {high:g}]")
+        speed, time = fastest.get(name, (0.0, 0.0))
+        if speed > joint.max_speed_dps + 1e-6:
+            found.append(f"{what}, at {time:.2f} s: too fast: {speed:.0f} deg/s, above its "
+                         f"limit of {joint.max_speed_dps:g} deg/s")
     return found
