@@ -49,7 +49,7 @@ def test_every_shipped_behaviour_fits_kaspar_3_and_the_demo_face():
     assert problems(library, load_config(KASPAR_3, poses=False).servos) == []
     # The demo robot has Kaspar 3's head and face, and only the pointing arm's three joints.
     missing = {line.split("joint ")[1].split(":")[0] for line in problems(library, CONFIG.servos)}
-    assert missing == {"right_wrist", "left_shoulder_roll", "left_elbow", "left_wrist"}
+    assert missing == {"left_shoulder_roll", "left_elbow"}
 
 
 def test_an_unknown_key_in_a_keyframe_names_file_behaviour_keyframe_and_key():
@@ -89,7 +89,7 @@ def test_mirroring_swaps_sides_and_negates_the_midline_and_eye_yaw_and_roll():
     library = load_library()
     assert library["thinking_left"].keyframes[0][1]["head_yaw"] == pytest.approx(
         -library["thinking"].keyframes[0][1]["head_yaw"])
-    assert "left_wrist" in library["wave_left"].joints and "right_wrist" not in (
+    assert "left_elbow" in library["wave_left"].joints and "right_elbow" not in (
         library["wave_left"].joints)
 
 

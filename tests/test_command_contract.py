@@ -95,6 +95,11 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
         (["--seed", "-1"], "--seed"),
     ],
     "fit-teacher": [([], "--out")],
+    "import": [
+        (["content", "--out", "o"], "--robot"),
+        (["content", "--robot", "kaspar-2", "--out", "o"], "--robot"),
+        (["content", "--robot", "kaspar-3"], "--out"),
+    ],
 }
 
 # Options whose value is any text: names the configuration defines (a profile, a group,
@@ -126,6 +131,7 @@ REQUIRED = {
     "export": ["--csv", "-"],
     "report": ["--out", "r"],
     "fit-teacher": ["--out", "-"],
+    "import": ["content", "--robot", "kaspar-3", "--out", "o"],
 }
 
 
@@ -249,6 +255,7 @@ def _failures(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "watch": (config, missing),
         "replicate": (["--state-dir", nowhere, "--studies", "100"], nowhere),
         "fit-teacher": (["--state-dir", nowhere, "--out", "-"], nowhere),
+        "import": ([nowhere, "--robot", "kaspar-3", "--out", str(tmp / "out"), *config], missing),
     }
 
 

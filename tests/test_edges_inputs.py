@@ -51,7 +51,7 @@ REFUSED = {
         DEMO.replace(HAPPY, "happy_pose = { grin = 20.0 }"),
         "game.happy_pose.grin: not a configured joint (joints: head_yaw, head_pitch, smile, "
         "right_shoulder_pitch, right_shoulder_roll, right_elbow, head_roll, mouth_open, "
-        "left_eyelid, right_eyelid, left_eye_yaw, right_eye_yaw, left_eye_pitch, right_eye_pitch)",
+        "left_eyelid, right_eyelid, left_eye_yaw, right_eye_yaw, left_eye_pitch, right_eye_pitch, eyes_yaw, eyes_pitch, eyelids)",
     ),
     "sad_pose_nan": (
         DEMO.replace("sad_pose = { head_pitch = 15.0 }", "sad_pose = { head_pitch = nan }"),

@@ -16,6 +16,13 @@ One arbiter of motion (hal.servos.claims): a move claims only the joints it move
 as long as it runs; stream steps go on for every other joint (the mouth while the arm
 points) and are dropped for the claimed ones; set_compliant and rest claim the joints
 they touch. Every goal, by any path, is told to the goal listeners (on_goals).
+
+Virtual joints and couplings (ServoSettings.realise): a pose may name a virtual joint
+(eyes_yaw) for the real joints it drives, and a joint that follows another (a lid
+following its eyeball's pitch) moves with its leader. A move or stream claims, clamps
+and speed-limits the real joints, followers included; commanded() and a stream's
+return give a follower's own value (its goal without its leader's share), the value a
+caller asks for.
 """
 
 from __future__ import annotations
@@ -36,6 +43,7 @@ from hal.errors import (
     RepeatFilter,
     ServoFaultError,
     ServoSilent,
+    SettingsError,
     UnknownJoint,
     UnsafeCommand,
 )
@@ -152,6 +160,9 @@ class Joints:
         self._retried_seen: dict[str, int] = {}  # bus name -> replies retried, as last logged
         self._bits: dict[tuple[str, str], int] = {}  # (joint, error bit) -> polls seen in a row
         self.step = 1.0 / settings.control_hz
+        # Each coupled joint's own value, as last asked (ServoSettings.realise adds its
+        # leader's share): a lid keeps it while its eye moves.
+        self._own: dict[str, float] = {}
 
     @classmethod
     def from_settings(cls, settings: ServoSettings, clock: Clock) -> Joints:
@@ -266,9 +277,7 @@ class Joints:
         profile takes at least `duration` seconds; its goals are told as `source`.
         Raises UnknownJoint, UnsafeCommand or ServoFaultError.
         """
-        unknown = [name for name in pose if name not in self._joints]
-        if unknown:
-            raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
+        pose = self._realise(pose)
         if duration is not None and not (duration >= 0 and math.isfinite(duration)):
             raise UnsafeCommand(f"duration must be a finite number >= 0, found {duration}")
         if speed is not None and not (speed > 0 and math.isfinite(speed)):
@@ -287,11 +296,12 @@ class Joints:
             await self._run_profile(joints, targets, duration, speed, source)
 
     def commanded(self) -> dict[str, float]:
-        """The last goal of every joint whose torque is on (where it is being held), in degrees."""
-        return {
+        """The last goal of every joint whose torque is on (where it is being held), in degrees
+        (a follower's own value, without its leader's share)."""
+        return self._own_values({
             name: j.commanded for name, j in self._joints.items()
             if j.torque is True and j.commanded is not None
-        }
+        })
 
     async def stream(
         self, pose: Pose, period: float, sources: Mapping[str, str] | None = None
@@ -309,9 +319,7 @@ class Joints:
         Raises UnknownJoint, UnsafeCommand (NaN target, bad period) and
         ServoFaultError while a fault is latched (or one is latched by this write).
         """
-        unknown = [name for name in pose if name not in self._joints]
-        if unknown:
-            raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
+        pose = self._realise(pose)
         if not (period > 0 and math.isfinite(period)):
             raise UnsafeCommand(f"period must be a finite number > 0, found {period}")
         self._refuse_if_faulted()
@@ -346,7 +354,53 @@ class Joints:
                     sources,
                     STREAM,
                 )
-        return sent
+        return self._own_values(sent)
+
+    def _realise(self, pose: Pose) -> dict[str, float]:
+        """`pose` as the real joints' goals (virtual joints expanded, followers moved)."""
+        virtual = self.settings.virtual
+        unknown = [name for name in pose if name not in self._joints and name not in virtual]
+        if unknown:
+            raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
+        if not virtual and not self.settings.couplings:
+            return dict(pose)
+        for name, degrees in pose.items():
+            if not math.isfinite(degrees):
+                raise UnsafeCommand(f"{name}: target {degrees} is not a number")
+        try:
+            expanded = self.settings.expand(pose)
+        except SettingsError as error:
+            raise UnsafeCommand(str(error)) from None
+        for coupling in self.settings.couplings:
+            if coupling.joint in expanded:
+                # Its own value, as asked (within its range): what it keeps when only its
+                # leader moves, and what commanded() gives.
+                self._own[coupling.joint] = self._joints[coupling.joint].clamp(
+                    expanded[coupling.joint])
+        where = self._own_values(
+            {n: j.commanded for n, j in self._joints.items() if j.commanded is not None}
+        )
+        for coupling in self.settings.couplings:
+            if coupling.follows in expanded and coupling.joint in where:
+                # From here on its own value is kept, not re-read through a clamped goal.
+                self._own.setdefault(coupling.joint, where[coupling.joint])
+        return self.settings.realise(pose, where)
+
+    def _own_values(self, goals: dict[str, float]) -> dict[str, float]:
+        """`goals` with each follower's own value (its goal without its leader's share)."""
+        for coupling in self.settings.couplings:
+            if coupling.joint not in goals:
+                continue
+            own = self._own.get(coupling.joint)
+            if own is None:
+                # Never asked: what it was found at, less its leader's share.
+                leader = self._joints[coupling.follows]
+                if leader.commanded is None:
+                    continue
+                own = goals[coupling.joint] - coupling.ratio * (
+                    leader.commanded - leader.settings.rest_deg)
+            goals[coupling.joint] = own
+        return goals
 
     async def set_compliant(self, group: str, compliant: bool) -> None:
         """Torque off for `group` (or one joint), or back on holding where each joint is.

@@ -3,7 +3,17 @@
 A joint's angle in degrees is measured from its servo's centre:
     degrees = direction * (raw - centre) * degrees_per_unit + offset_deg
 so `offset_deg` is the joint's angle when the servo sits at its centre, and
-`direction = -1` mirrors a servo mounted the other way round (a left arm).
+`direction = -1` mirrors a servo mounted the other way round (a left arm). The
+centre is the model's (512, 1500 us) unless the joint gives `centre_raw`: the
+published robots set each servo's centre (Kaspar 3's mouth sits at raw 620, and
+each robot's eyes at their own microseconds).
+
+Virtual joints (`[[servos.virtual_joints]]`) name several real joints moved as one
+(EYES_YAW, EYELIDS): each real joint goes to its ratio times the virtual joint's
+angle. A coupling (`[[servos.couplings]]`) makes a joint follow another: its goal
+is its own plus ratio times how far its leader is from the leader's rest (a lid
+that follows its eyeball's pitch). Both are expanded by `ServoSettings.realise`,
+the one place that turns a pose into real joints' goals.
 
 Validation: a key's own limits are on its field (a Literal, or msgspec.Meta,
 which msgspec holds while decoding and kasparctl.config words as "expected
@@ -15,8 +25,11 @@ table's key).
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import sys
 import typing
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
@@ -94,6 +107,13 @@ MODELS: dict[str, ServoModel] = {
 }
 
 
+@functools.cache
+def centred(model: str, centre_raw: int | None) -> ServoModel:
+    """The model `model` with its centre moved to `centre_raw` (its own centre if None)."""
+    base = MODELS[model]
+    return base if centre_raw is None else dataclasses.replace(base, raw_centre=centre_raw)
+
+
 def model_named(model_number: int, protocol: str) -> str | None:
     """The MODELS name of a servo that reports `model_number` on `protocol`; None if unknown."""
     for name, model in MODELS.items():
@@ -135,9 +155,18 @@ class JointSettings(_Settings, frozen=True):
     max_speed_dps: Annotated[float, msgspec.Meta(gt=0, le=720, extra={"unit": "deg/s"})] = 60.0
     rest_deg: Finite = 0.0
     group: str = "body"
+    # The raw position at which the joint reads offset_deg; the model's centre if unset.
+    centre_raw: int | None = None
 
     def __post_init__(self) -> None:
         """Range, rest and reach agree; SettingsError names the joint otherwise."""
+        model = MODELS[self.model]
+        if self.centre_raw is not None and not model.raw_min <= self.centre_raw <= model.raw_max:
+            unit = " (quarter-microseconds: 1500 us is 6000)" if model.protocol == "maestro" else ""
+            raise SettingsError(
+                f"joint {self.name!r}: centre_raw {self.centre_raw} is outside what a "
+                f"{self.model} can take, {model.raw_min} to {model.raw_max}{unit}"
+            )
         low, high = self.range_deg
         if not low < high:
             raise SettingsError(
@@ -148,7 +177,7 @@ class JointSettings(_Settings, frozen=True):
                 f"joint {self.name!r}: rest_deg {self.rest_deg} is outside "
                 f"range_deg [{low}, {high}]"
             )
-        reach_low, reach_high = MODELS[self.model].reach(self.direction, self.offset_deg)
+        reach_low, reach_high = self.servo.reach(self.direction, self.offset_deg)
         if low < reach_low - 1e-6 or high > reach_high + 1e-6:
             raise SettingsError(
                 f"joint {self.name!r}: range_deg [{low}, {high}] goes beyond what a {self.model} "
@@ -157,8 +186,30 @@ class JointSettings(_Settings, frozen=True):
 
     @property
     def servo(self) -> ServoModel:
-        """The model of the joint's servo (units, centre, protocol)."""
-        return MODELS[self.model]
+        """The model of the joint's servo (units, protocol), centred at centre_raw if set."""
+        return centred(self.model, self.centre_raw)
+
+
+Ratio = Annotated[
+    float,
+    msgspec.Meta(ge=-10, le=10, extra={"expected": "a ratio from -10 to 10, not 0"}),
+]
+
+
+class VirtualJointSettings(_Settings, frozen=True):
+    """Several real joints moved as one (both eyes' yaw): each to ratio * the angle."""
+
+    name: Annotated[str, msgspec.Meta(pattern=r"^[a-z][a-z0-9_]*$",
+                                      extra={"expected": "a name of a-z, 0-9 and _"})]
+    drives: dict[str, Ratio]  # real joint -> ratio
+
+
+class CouplingSettings(_Settings, frozen=True):
+    """A joint that follows another: its goal plus ratio * (leader - leader's rest)."""
+
+    joint: str
+    follows: str
+    ratio: Ratio
 
 
 class ServoSettings(_Settings, frozen=True):
@@ -177,6 +228,8 @@ class ServoSettings(_Settings, frozen=True):
     max_temperature_c: Annotated[float, msgspec.Meta(ge=20, le=120, extra={"unit": "C"})] = 65.0
     buses: tuple[BusSettings, ...] = ()
     joints: tuple[JointSettings, ...] = ()
+    virtual_joints: tuple[VirtualJointSettings, ...] = ()
+    couplings: tuple[CouplingSettings, ...] = ()
 
     def __post_init__(self) -> None:
         """Buses and joints agree with each other; SettingsError names the entry otherwise."""
@@ -215,6 +268,107 @@ class ServoSettings(_Settings, frozen=True):
                 raise SettingsError(f"{where}: group {joint.group!r} is also a joint name")
         if self.backend == "real" and not self.joints:
             raise SettingsError("backend 'real' needs at least one joint")
+        self._check_virtual(seen_names)
+        self._check_couplings(seen_names)
+
+    def _check_virtual(self, real: set[str]) -> None:
+        names: set[str] = set()
+        groups = {joint.group for joint in self.joints}
+        for index, virtual in enumerate(self.virtual_joints):
+            where = f"virtual_joints[{index}] ({virtual.name})"
+            if virtual.name in real or virtual.name in names or virtual.name in groups:
+                raise SettingsError(
+                    f"{where}: name {virtual.name!r} is already a joint, group or virtual joint"
+                )
+            names.add(virtual.name)
+            if not virtual.drives:
+                raise SettingsError(f"{where}: drives: expected at least one real joint")
+            for joint, ratio in virtual.drives.items():
+                if joint not in real:
+                    raise SettingsError(
+                        f"{where}: drives.{joint}: expected a configured real joint "
+                        f"({', '.join(sorted(real)) or 'none configured'}), found {joint!r}"
+                    )
+                if ratio == 0:
+                    raise SettingsError(f"{where}: drives.{joint}: expected a ratio other than 0")
+
+    def _check_couplings(self, real: set[str]) -> None:
+        followers: set[str] = set()
+        leaders = {c.follows for c in self.couplings}
+        for index, coupling in enumerate(self.couplings):
+            where = f"couplings[{index}] ({coupling.joint})"
+            for key in ("joint", "follows"):
+                name = getattr(coupling, key)
+                if name not in real:
+                    raise SettingsError(
+                        f"{where}: {key}: expected a configured real joint "
+                        f"({', '.join(sorted(real)) or 'none configured'}), found {name!r}"
+                    )
+            if coupling.joint == coupling.follows:
+                raise SettingsError(f"{where}: follows: a joint cannot follow itself")
+            if coupling.joint in followers:
+                raise SettingsError(f"{where}: joint: {coupling.joint!r} already follows a joint")
+            if coupling.joint in leaders:
+                # One step only: a chain would make a lid depend on a joint two away.
+                raise SettingsError(
+                    f"{where}: joint: {coupling.joint!r} is itself followed: no chains"
+                )
+            if coupling.ratio == 0:
+                raise SettingsError(f"{where}: ratio: expected a ratio other than 0")
+            followers.add(coupling.joint)
+
+    @property
+    def virtual(self) -> dict[str, Mapping[str, float]]:
+        """Virtual joint name -> {real joint: ratio}."""
+        return {v.name: v.drives for v in self.virtual_joints}
+
+    def expand(self, pose: Mapping[str, float]) -> dict[str, float]:
+        """`pose` in real joints: each virtual joint replaced by the joints it drives.
+
+        SettingsError for a name that is neither, or a real joint set twice (by name
+        and through a virtual joint, or by two virtual joints).
+        """
+        virtual = self.virtual
+        real = {joint.name for joint in self.joints}
+        out: dict[str, float] = {}
+        via: dict[str, str] = {}
+        for name, degrees in pose.items():
+            targets = virtual.get(name)
+            if targets is None:
+                if name not in real:
+                    raise SettingsError(f"unknown joint {name!r}")
+                targets = {name: 1.0}
+            for joint, ratio in targets.items():
+                if joint in out:
+                    raise SettingsError(
+                        f"joint {joint!r} is set twice: by {via[joint]} and by {name}"
+                    )
+                out[joint] = ratio * degrees
+                via[joint] = name
+        return out
+
+    def realise(
+        self, pose: Mapping[str, float], where: Mapping[str, float] | None = None
+    ) -> dict[str, float]:
+        """The real joints' goals for `pose`: virtual joints expanded, couplings applied.
+
+        A follower's own value is its value in the pose, else `where` it is (its rest
+        if unknown); it moves whenever it or its leader is in the pose, so a move of
+        the eyeball's pitch carries the lid with it.
+        """
+        goals = self.expand(pose)
+        if not self.couplings:
+            return goals
+        rests = {joint.name: joint.rest_deg for joint in self.joints}
+        known = where or {}
+        for coupling in self.couplings:
+            follower, leader = coupling.joint, coupling.follows
+            if follower not in goals and leader not in goals:
+                continue
+            own = goals.get(follower, known.get(follower, rests[follower]))
+            lead = goals.get(leader, known.get(leader, rests[leader]))
+            goals[follower] = own + coupling.ratio * (lead - rests[leader])
+        return goals
 
     def bus(self, name: str) -> BusSettings:
         """The bus called `name`; UnknownBus (a KeyError) if there is none."""

@@ -19,6 +19,10 @@ at `time` seconds from the start. A joint moves from its previous keyframe namin
 it (or from 0 at time 0) along a minimum-jerk curve, and holds its last offset to
 the end. `strength` (0 to 1) scales every offset.
 
+A behaviour may name a robot's virtual joints (eyes_yaw, eyes_pitch, eyelids:
+`[[servos.virtual_joints]]`): `in_real_joints` plays each as the real joints it
+drives, its offsets times their ratios (exact, since a virtual joint is linear).
+
 Mirroring (`mirror = true`): left_* and right_* joints swap, and the yaw and roll
 of the midline (head_yaw, head_roll, torso_yaw, ...) and of the eyes (*eye_yaw)
 change sign, since those angles are measured in one frame for the whole robot. A
@@ -41,6 +45,7 @@ from typing import Any
 import msgspec
 
 from hal.errors import KasparError
+from hal.servos.settings import ServoSettings
 
 # A behaviour longer than this is a mistake in its file (a time in ms, not s).
 MAX_DURATION_S = 60.0
@@ -147,6 +152,34 @@ class Behaviour:
                 yield number, joint, times[index - 1], values[index - 1], times[index], values[
                     index
                 ]
+
+
+def in_real_joints(behaviour: Behaviour, servos: ServoSettings) -> Behaviour:
+    """`behaviour` with each virtual joint of `servos` replaced by the real joints it drives.
+
+    Names that are neither stay (a joint the robot lacks is skipped when played).
+    BehaviourError names the keyframe that sets a real joint twice (by its name and
+    through a virtual joint).
+    """
+    virtual = servos.virtual
+    if not virtual or not any(name in virtual for _, pose in behaviour.keyframes
+                              for name in pose):
+        return behaviour
+    frames: list[tuple[float, Mapping[str, float]]] = []
+    for number, (time, pose) in enumerate(behaviour.keyframes, 1):
+        real: dict[str, float] = {}
+        via: dict[str, str] = {}
+        for name, offset in pose.items():
+            for joint, ratio in virtual.get(name, {name: 1.0}).items():
+                if joint in real:
+                    raise BehaviourError(
+                        f"{behaviour.source}: behaviour {behaviour.name!r}, keyframe {number}: "
+                        f"joint {joint} is set twice, by {via[joint]} and by {name}"
+                    )
+                real[joint] = ratio * offset
+                via[joint] = name
+        frames.append((time, real))
+    return Behaviour(behaviour.name, behaviour.source, behaviour.description, tuple(frames))
 
 
 def shipped_dir() -> Path:

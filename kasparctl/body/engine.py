@@ -42,7 +42,7 @@ from hal.errors import HalError
 from hal.servos.api import Fault, ServoApi
 from hal.servos.settings import ServoSettings
 from kasparctl.body.api import Gaze, GazeKind
-from kasparctl.body.behaviours import Behaviour, minimum_jerk
+from kasparctl.body.behaviours import Behaviour, in_real_joints, minimum_jerk
 from kasparctl.body.mouth import Mouth
 from kasparctl.config import BodySettings
 
@@ -110,7 +110,9 @@ class LiveBody:
         """
         self._servos = servos
         self._settings = settings
-        self._library = dict(library)
+        # Virtual joints (eyes_yaw, eyelids) played as the real joints they drive.
+        self._library = {n: in_real_joints(b, servo_settings) for n, b in library.items()}
+        self._virtual = servo_settings.virtual
         self._clock = clock
         self._rng = rng or random.Random()
         self.period = 1.0 / settings.rate_hz
@@ -454,12 +456,19 @@ class LiveBody:
     def _gaze_pose(self, gaze: Gaze) -> dict[str, float]:
         table = self._settings.gaze
         if gaze.kind is GazeKind.CHILD and 0 <= gaze.index < len(table.children):
-            return dict(table.children[gaze.index])
-        if gaze.kind is GazeKind.BAG and 0 <= gaze.index < len(table.bags):
-            return dict(table.bags[gaze.index])
-        if gaze.kind is GazeKind.RESEARCHER and table.researcher:
-            return dict(table.researcher)
-        return dict(table.ahead)
+            pose = table.children[gaze.index]
+        elif gaze.kind is GazeKind.BAG and 0 <= gaze.index < len(table.bags):
+            pose = table.bags[gaze.index]
+        elif gaze.kind is GazeKind.RESEARCHER and table.researcher:
+            pose = table.researcher
+        else:
+            pose = table.ahead
+        # A virtual joint (eyes_yaw) as the real joints it drives (the rules checked the pose).
+        real: dict[str, float] = {}
+        for name, degrees in pose.items():
+            for joint, ratio in self._virtual.get(name, {name: 1.0}).items():
+                real[joint] = ratio * degrees
+        return real
 
     def _on_fault(self, fault: Fault) -> None:
         self.cancel()

@@ -16,6 +16,7 @@ from typing import Any
 import msgspec
 
 from hal.voice.settings import voice_for_language
+from kasparctl.config.centres import apply_centres_file
 from kasparctl.config.errors import ConfigError, utf8_text
 from kasparctl.config.explain import explain_validation_error
 from kasparctl.config.poses import apply_poses_file
@@ -74,6 +75,8 @@ def parse_config(
         config = msgspec.structs.replace(config, voice=voice)
     if base_dir is not None:
         config = _resolve_paths(config, base_dir)
+    if config.centres_file is not None:
+        config = apply_centres_file(config)
     if poses and config.poses_file is not None:
         config = apply_poses_file(config, source)
     return config
@@ -100,4 +103,6 @@ def _resolve_paths(config: Config, base_dir: Path) -> Config:
         changes["phrases_dir"] = str(base_dir / config.phrases_dir)
     if config.poses_file is not None:
         changes["poses_file"] = str(base_dir / config.poses_file)
+    if config.centres_file is not None:
+        changes["centres_file"] = str(base_dir / config.centres_file)
     return msgspec.structs.replace(config, **changes)

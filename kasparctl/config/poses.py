@@ -16,6 +16,7 @@ from typing import Any
 
 import msgspec
 
+from hal.errors import SettingsError
 from hal.servos.settings import ServoSettings
 from kasparctl.config.errors import ConfigError, utf8_text
 from kasparctl.config.schema import Config
@@ -63,21 +64,43 @@ def read_poses(path: str | Path) -> dict[str, dict[str, float]]:
 def check_pose(
     pose: dict[str, float], name: str, servos: ServoSettings, source: str
 ) -> None:
-    """Refuse a pose with an unknown joint or one outside its safe range, naming both."""
+    """Refuse a pose with an unknown joint or one outside its safe range, naming both.
+
+    A pose may name virtual joints (eyes_yaw); it is checked as the real joints'
+    goals it makes, with each coupled joint (a lid) where its leader puts it.
+    """
     joints = {joint.name: joint for joint in servos.joints}
-    for joint_name, degrees in pose.items():
-        joint = joints.get(joint_name)
-        if joint is None:
-            known = ", ".join(joints) or "none configured"
+    virtual = servos.virtual
+    for joint_name in pose:
+        if joint_name not in joints and joint_name not in virtual:
+            known = ", ".join([*joints, *virtual]) or "none configured"
             raise ConfigError(source, f"{name}.{joint_name}",
                               f"not a configured joint (joints: {known})")
+    try:
+        goals = servos.realise(pose)
+    except SettingsError as error:
+        raise ConfigError(source, name, str(error)) from None
+    for joint_name, degrees in goals.items():
+        joint = joints[joint_name]
         low, high = joint.range_deg
-        if not low <= degrees <= high:
+        if not low - 1e-9 <= degrees <= high + 1e-9:
+            movers = [joint_name] if joint_name in pose else _through(joint_name, pose, servos)
+            via = "" if joint_name in pose else f" (through {', '.join(movers)})"
             raise ConfigError(
-                source, f"{name}.{joint_name}",
-                f"pose {name!r} puts joint {joint_name!r} at {degrees} deg, outside its "
+                source, f"{name}.{movers[0]}",
+                f"pose {name!r} puts joint {joint_name!r}{via} at {degrees} deg, outside its "
                 f"safe range [{low}, {high}]",
             )
+
+
+def _through(joint: str, pose: dict[str, float], servos: ServoSettings) -> list[str]:
+    """The names of `pose` that move `joint`: virtual joints driving it, leaders it follows."""
+    names = [v for v, drives in servos.virtual.items() if v in pose and joint in drives]
+    names += [c.follows for c in servos.couplings if c.joint == joint and c.follows in pose]
+    names += [v for v, drives in servos.virtual.items() if v in pose
+              and any(c.joint == joint and c.follows in drives for c in servos.couplings)]
+    names += [n for n in pose if any(c.joint == joint for c in servos.couplings)]
+    return list(dict.fromkeys(names))
 
 
 def apply_poses_file(config: Config, config_source: str) -> Config:

@@ -348,6 +348,9 @@ class Config(_Settings, frozen=True):
     # Its "happy" and "sad" poses are the game's expressions, a pose named like a pilot
     # location is where Kaspar points for it, and "rest" gives the joints' rest positions.
     poses_file: str | None = None
+    # This individual robot's servo centres (`[joint] centre_raw = N` tables), relative to
+    # this file, merged over [servos] (kasparctl.config.centres; docs/servos.md).
+    centres_file: str | None = None
     # What Kaspar speaks: its phrase book, its toys' words and (unless [voice] names
     # one) its voice. docs/languages.md.
     language: Annotated[
