@@ -86,7 +86,9 @@ def build(
 
                 built_researcher = SimKeyfob(clock, commands=researcher.command_names())
             else:
-                built_researcher = Keyfob(researcher, clock, role="researcher")
+                built_researcher = Keyfob(
+                    researcher, clock, role="researcher", needs=researcher.gesture_needs()
+                )
     if sim or voice.backend == "sim":
         from hal.voice.sim import SimVoice
 

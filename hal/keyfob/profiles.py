@@ -275,3 +275,56 @@ def _match(data: object, fail: _Fail) -> Match:
         raise fail("match.interface", "the USB interface number", interface)
     return Match(values["vendor"], values["product"], interface)
 
+
+
+_GESTURE_WORDS = {"press": "press", "long": "hold", "double": "double press"}
+
+
+def key_table(chosen: Profile) -> str:
+    """The profile as docs/keyfob-and-voice.md shows it: each button, its keys, its commands."""
+    lines = [
+        f"#### {chosen.title} (`profile = \"{chosen.name}\"`)",
+        "",
+        chosen.notes.strip(),
+        "",
+        (
+            f"Found without a udev rule by its USB ids: {chosen.match.describe()}."
+            if chosen.match.vendor is not None
+            else "No fixed USB ids: found by a udev rule (or its name)."
+        ),
+        "",
+        "| button | keys it sends | researcher's device | children's keyfob |",
+        "|---|---|---|---|",
+    ]
+    answers = {button: slot for slot, button in chosen.answers.items()}
+    for button, keys in chosen.buttons.items():
+        given = []
+        for gesture, command in chosen.commands.items():
+            kind, _, named = gesture.partition(" ")
+            if named == button:
+                given.append(f"{_GESTURE_WORDS[kind]}: {command}")
+        if "both" in chosen.commands and button in chosen.slots():
+            given.append(f"both held: {chosen.commands['both']}")
+        child = answers.get(button) or next(
+            (c for g, c in chosen.commands.items() if g == f"press {button}"), ""
+        )
+        child_text = child if child in ("green", "red") else (
+            f"{child} (keypad source)" if child else "-"
+        )
+        lines.append(
+            f"| {button} | {', '.join(f'`{k}`' for k in keys)} | {'; '.join(given) or '-'} "
+            f"| {child_text} |"
+        )
+    if chosen.ignore:
+        lines += ["", "Ignored: " + ", ".join(f"`{key}`" for key in chosen.ignore) + "."]
+    return "\n".join(lines)
+
+
+def key_tables() -> str:
+    """Every profile's table, in name order (the generated part of the doc)."""
+    return "\n\n".join(key_table(profile(name)) for name in names()) + "\n"
+
+
+if __name__ == "__main__":
+    # python -m hal.keyfob.profiles > the tables to paste between the doc's markers
+    print(key_tables(), end="")
