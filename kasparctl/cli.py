@@ -42,6 +42,7 @@ COMMAND_MODULES = (
     "watch",
     "replicate",
     "fit_teacher",
+    "keyfob",
 )
 
 

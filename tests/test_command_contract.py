@@ -95,6 +95,8 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
         (["--seed", "-1"], "--seed"),
     ],
     "fit-teacher": [([], "--out")],
+    "keyfob list": [(["--sys", ""], "--sys")],
+    "keyfob learn": [(["researcher", "1", "--timeout", "0"], "--timeout"), (["nobody", "1"], "role")],
 }
 
 # Options whose value is any text: names the configuration defines (a profile, a group,
@@ -109,6 +111,7 @@ FREE_TEXT = {
     ("behaviour record", "--group"),
     ("say", "text"),
     ("say", "--key"),
+    ("keyfob learn", "device"),
 }
 
 
@@ -126,6 +129,7 @@ REQUIRED = {
     "export": ["--csv", "-"],
     "report": ["--out", "r"],
     "fit-teacher": ["--out", "-"],
+    "keyfob learn": ["researcher", "1"],
 }
 
 
@@ -249,11 +253,15 @@ def _failures(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "watch": (config, missing),
         "replicate": (["--state-dir", nowhere, "--studies", "100"], nowhere),
         "fit-teacher": (["--state-dir", nowhere, "--out", "-"], nowhere),
+        "keyfob learn": (["researcher", "event999", *config], "event999"),
     }
 
 
 FAILURES = set(_failures(Path("/")))
-CANNOT_FAIL = {"install": "it prints a text and reads nothing"}
+CANNOT_FAIL = {
+    "install": "it prints a text and reads nothing",
+    "keyfob list": "it lists what sysfs has, or says there is nothing",
+}
 # Failures a subcommand reports itself, as lines for the journal at error priority
 # (systemd runs `kasparctl reload` as ExecReload): no exception reaches the command line.
 REPORTED_BY_THE_COMMAND = {"reload"}

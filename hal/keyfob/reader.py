@@ -241,6 +241,11 @@ class Keyfob:
         self._timer = self._watch = None
         self._drop_device()
 
+    def locate(self) -> EvdevDevice:
+        """The configured device, opened as the reader would open it (not grabbed, not
+        read); the caller closes it. OSError or KeyfobError when it cannot be."""
+        return self._open_device()
+
     def probe(self) -> str:
         """Open the configured keyfob once and close it: "path (name)".
 
