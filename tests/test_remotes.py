@@ -189,7 +189,9 @@ def test_check_asks_for_a_press_and_names_the_key(rig):
         ("keyfob", True, "KEY_B pressed: red"),
         ("researcher", True, "KEY_F5 pressed: reopen, hold: stop"),
     ]
-    # Nothing pressed: a failed row.
+
+
+def test_check_with_no_press_fails_the_row(rig):
     rows = checked(rig, KEYFOB_AND_RECEIVER, press_within=1.0)
     assert [(r.part, r.ok, r.detail) for r in rows if "pressed" in r.detail] == [
         ("keyfob", False, "no button pressed within 1 s"),
