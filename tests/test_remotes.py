@@ -88,8 +88,8 @@ def learn(rig, role: str, answers: dict[str, list[str]], timeout: float = 0.3):
     def say(line: str) -> None:
         said.append(line)
         for what, keys in answers.items():
-            if line.startswith(f"Press the button for {what!r}") or line.startswith(
-                f"That button is already") and what == "again":
+            if line.startswith(f"Press the button for {what!r}") or (line.startswith(
+                "That button is already") and what == "again"):
                 press(device, *keys)
 
     written = remotes.learn(
@@ -100,7 +100,7 @@ def learn(rig, role: str, answers: dict[str, list[str]], timeout: float = 0.3):
 
 
 def test_learning_the_researchers_presenter_writes_its_keys_and_its_rule(rig):
-    config, (path, rule), said = learn(rig, "researcher", {
+    config, (_path, rule), said = learn(rig, "researcher", {
         "next": ["KEY_PAGEDOWN", "KEY_PAGEDOWN"],
         "pause": ["KEY_PAGEDOWN", "KEY_PAGEUP", "KEY_PAGEUP"],  # first the button of next
         "undo": ["KEY_DOT", "KEY_DOT"],
@@ -123,7 +123,7 @@ def test_learning_the_researchers_presenter_writes_its_keys_and_its_rule(rig):
     researcher = parse_config(text, "kaspar.toml").researcher
     assert researcher.key_map()[K["KEY_ESC"]] == researcher.key_map()[K["KEY_F5"]] == "stop"
     assert rule == rig[0] / "rules" / "99-kaspar-researcher.rules"
-    (line,) = [l for l in rule.read_text().splitlines() if not l.startswith("#")]
+    (line,) = [text for text in rule.read_text().splitlines() if not text.startswith("#")]
     assert line == (
         'ACTION=="add|change", SUBSYSTEM=="input", KERNEL=="event*", ATTRS{idVendor}=="046d", '
         'ATTRS{idProduct}=="c52d", ENV{ID_USB_INTERFACE_NUM}=="00", '
@@ -141,7 +141,7 @@ def test_learning_the_childrens_keyfob(rig):
 
 
 def test_a_button_the_game_needs_not_pressed_stops_learning_and_writes_nothing(rig):
-    with pytest.raises(remotes.RemoteError, match="no key pressed for 'pause' within 0.3 s"):
+    with pytest.raises(remotes.RemoteError, match=r"no key pressed for 'pause' within 0\.3 s"):
         learn(rig, "researcher", {"next": ["KEY_PAGEDOWN"] * 2})
     assert (rig[0] / "kaspar.toml").read_text() == CONFIG
     assert not (rig[0] / "rules").exists()
@@ -156,7 +156,7 @@ def test_a_device_that_is_not_there_is_named(rig):
 
 
 def checked(rig, text: str, press_within=None, pressed: tuple[str, ...] = ()):
-    tmp_path, sys_root, bank = rig
+    _tmp_path, sys_root, bank = rig
     for key in pressed:
         press(bank.devices[str(bank.directory / "event9")], key)
     config = parse_config(text.replace("DEV", str(bank.directory)), "kaspar.toml")
@@ -200,7 +200,7 @@ def test_check_with_no_press_fails_the_row(rig):
 
 
 def test_a_low_battery_fails_the_check_with_its_level(rig, tmp_path):
-    tmp, sys_root, bank = rig
+    _tmp, sys_root, _bank = rig
     supply = next((sys_root / "devices").rglob("hidpp_battery_9"))
     (supply / "capacity").write_text("12\n")
     rows = checked(rig, KEYFOB_AND_RECEIVER + "battery_warn_percent = 15\n")
@@ -225,3 +225,25 @@ def test_settings_by_default():
     assert ResearcherSettings().profile == "logitech-r400"
     assert KeyfobSettings().profile == "generic-keyfob"
     assert os.path.basename(remotes.rule_path("researcher")) == "99-kaspar-researcher.rules"
+
+
+# -- the service's battery warning ---------------------------------------------------
+
+
+def test_the_service_warns_of_a_battery_below_its_level(rig):
+    from kasparctl.service.batteries import low_batteries
+
+    _tmp, sys_root, bank = rig
+    os.symlink("event9", bank.directory / "kaspar-researcher")  # as the udev rule makes it
+    supply = next((sys_root / "devices").rglob("hidpp_battery_9"))
+    text = f'[keyfob]\ndevice = "{bank.directory}/event3"\n[researcher]\ndevice = "{bank.directory}/kaspar-researcher"\n'
+    assert low_batteries(parse_config(text, "k.toml"), str(sys_root)) is None  # Normal, 50%
+    (supply / "capacity_level").write_text("Low\n")
+    assert low_batteries(parse_config(text, "k.toml"), str(sys_root)) == (
+        "researcher's remote battery Low (15%) (below 20%)"
+    )
+    # No rule made the path: the receiver found by the profile's ids.
+    os.unlink(bank.directory / "kaspar-researcher")
+    assert low_batteries(parse_config(text, "k.toml"), str(sys_root)) is not None
+    simulated = text.replace("[keyfob]\n", "[keyfob]\nbackend = 'sim'\n")
+    assert low_batteries(parse_config(simulated, "k.toml"), str(sys_root)) is None

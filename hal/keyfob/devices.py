@@ -188,3 +188,26 @@ def _hex(path: Path) -> int:
         return int(text, 16) if text else 0
     except ValueError:
         return 0
+
+
+def battery_of(
+    path: str | None,
+    ids: tuple[int | None, int | None, int | None] = (None, None, None),
+    sys_root: str = "/sys",
+) -> Battery | None:
+    """The battery of the node at `path` (a udev symlink followed), else of the first node
+    with these (vendor, product, interface); None where the kernel reports none."""
+    node = node_of(path, sys_root) if path else None
+    vendor, product, interface = ids
+    if node is None and vendor is not None:
+        node = next(
+            (
+                n
+                for n in input_nodes(sys_root)
+                if n.vendor == vendor
+                and (product is None or n.product == product)
+                and (interface is None or n.interface == interface)
+            ),
+            None,
+        )
+    return node.battery if node is not None else None

@@ -141,11 +141,11 @@ class Profile:
             for key in self.buttons[button]:
                 mapping[key_code(key)] = slot
         for gesture, command in self.commands.items():
-            kind, button = _split(gesture)
-            if kind is GestureKind.PRESS and button is not None and button not in (
+            kind, pressed = _split(gesture)
+            if kind is GestureKind.PRESS and pressed is not None and pressed not in (
                 self.answers.values()
             ):
-                for key in self.buttons[button]:
+                for key in self.buttons[pressed]:
                     mapping.setdefault(key_code(key), command)
         return mapping
 
@@ -231,7 +231,8 @@ def parse(name: str, text: str, where: str) -> Profile:
     for button, keys in buttons.items():
         for key in keys:
             if key in seen:
-                raise fail(f"buttons.{button}", "keys no other button sends", f"{key} of {seen[key]}")
+                other = f"{key} of {seen[key]}"
+                raise fail(f"buttons.{button}", "keys no other button sends", other)
             seen[key] = button
     return result
 

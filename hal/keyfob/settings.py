@@ -64,7 +64,8 @@ DevicePath = Annotated[
 DeviceName = Annotated[str, msgspec.Meta(pattern=r"\S", extra={"expected": "a device name"})]
 # A USB vendor or product id as lsusb writes it: four hex digits.
 UsbId = Annotated[
-    str, msgspec.Meta(pattern="^[0-9a-fA-F]{4}$", extra={"expected": "four hex digits such as '046d'"})
+    str,
+    msgspec.Meta(pattern="^[0-9a-fA-F]{4}$", extra={"expected": "four hex digits such as '046d'"}),
 ]
 # The USB interface whose event node carries the keys (bInterfaceNumber).
 Interface = Annotated[int, msgspec.Meta(ge=0, le=255)]

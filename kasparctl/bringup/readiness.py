@@ -19,7 +19,6 @@ from typing import Any
 
 from hal.clock import MonotonicClock
 from hal.servos.api import JointStatus
-from hal.servos.bus import open_failure
 from hal.servos.joints import Joints
 from hal.servos.settings import ServoSettings
 from kasparctl.body.behaviours import BehaviourError, load_library

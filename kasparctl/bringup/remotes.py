@@ -13,6 +13,7 @@ pressed within the given seconds.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import select
 import time
@@ -242,10 +243,8 @@ def learn(
     say(f"Learning {node.describe(input_dir)} as the {role}'s device.")
     device = opener(f"{input_dir}/{node.node}")
     try:
-        try:
+        with contextlib.suppress(OSError):
             device.grab()  # its keys reach nothing else while they are learned
-        except OSError:
-            pass
         learned = learn_buttons(role, device, say, timeout)
     finally:
         device.close()
