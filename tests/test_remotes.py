@@ -247,3 +247,39 @@ def test_the_service_warns_of_a_battery_below_its_level(rig):
     assert low_batteries(parse_config(text, "k.toml"), str(sys_root)) is not None
     simulated = text.replace("[keyfob]\n", "[keyfob]\nbackend = 'sim'\n")
     assert low_batteries(parse_config(simulated, "k.toml"), str(sys_root)) is None
+
+
+# -- the shipped rules ---------------------------------------------------------------
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def rule_lines(name: str) -> list[str]:
+    text = (REPO / "systemd" / name).read_text().replace("\\\n", "")
+    return [line for line in text.splitlines() if line.strip() and not line.startswith("#")]
+
+
+@pytest.mark.parametrize(("name", "link"), [("99-kaspar-keyfob.rules", "kaspar-keyfob"),
+                                            ("99-kaspar-researcher.rules", "kaspar-researcher")])  # fmt: skip
+def test_each_shipped_input_rule_names_one_node(name, link):
+    (line,) = rule_lines(name)
+    assert 'KERNEL=="event*"' in line and f'SYMLINK+="input/{link}"' in line
+    # One node of a device with several interfaces: the interface is matched too.
+    assert 'ENV{ID_USB_INTERFACE_NUM}=="' in line, line
+
+
+def test_the_researchers_rule_is_the_default_profiles_device():
+    from hal.keyfob.profiles import profile
+
+    match = profile(ResearcherSettings().profile).match
+    (line,) = rule_lines("99-kaspar-researcher.rules")
+    assert f'ATTRS{{idVendor}}=="{match.vendor:04x}"' in line
+    assert f'ATTRS{{idProduct}}=="{match.product:04x}"' in line
+    assert f'ENV{{ID_USB_INTERFACE_NUM}}=="{match.interface:02x}"' in line
+    assert ResearcherSettings().device_path == "/dev/input/kaspar-researcher"
+
+
+def test_install_sh_installs_both_input_rules():
+    script = (REPO / "systemd" / "install.sh").read_text()
+    (rules,) = [line for line in script.splitlines() if line.startswith("RULES=(")]
+    assert "99-kaspar-keyfob.rules" in rules and "99-kaspar-researcher.rules" in rules
