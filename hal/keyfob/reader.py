@@ -274,14 +274,10 @@ class Keyfob:
                     raise
                 return self._opener(f"{self._input_dir}/{node.node}")
         wanted = self._settings.name
-        # sysfs says what each node is without opening it; a tree without it (a
-        # container) leaves opening each node and asking its name.
-        nodes = input_nodes(self._sys_root)
-        if nodes:
-            named = [node for node in nodes if node.name == wanted]
-            node = self._best(named)
-            if node is None:
-                raise KeyfobError(f"no input device named {wanted!r} in {self._input_dir}")
+        # sysfs says what each node is without opening it; where it names none (a
+        # container, a tree of test nodes) each node is opened and asked its name.
+        node = self._best([node for node in input_nodes(self._sys_root) if node.name == wanted])
+        if node is not None:
             return self._opener(f"{self._input_dir}/{node.node}")
         entries = sorted(Path(self._input_dir).glob("event*"), key=_event_number)
         for entry in entries:
