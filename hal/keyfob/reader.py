@@ -130,8 +130,8 @@ class EvdevDevice(Protocol):
 
 
 def open_evdev(path: str) -> EvdevDevice:
-    """Open the evdev device node `path`, its events stamped by CLOCK_MONOTONIC; OSError
-    (ENOENT, EACCES, ...) when it cannot be."""
+    """Open the evdev device node `path`; OSError (ENOENT, EACCES, ...) when it cannot be.
+    (The reader then asks for CLOCK_MONOTONIC stamps: stamp_monotonic.)"""
     import evdev
 
     return evdev.InputDevice(path)

@@ -20,12 +20,16 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from hal.errors import HalError, KasparError
 from hal.keyfob.devices import InputNode, input_nodes, node_of
 from hal.keyfob.reader import EV_KEY, KEY_DOWN, EvdevDevice, Keyfob, open_evdev
-from hal.keyfob.settings import DEFAULT_DEVICE, DEFAULT_RESEARCHER_DEVICE
+from hal.keyfob.settings import (
+    DEFAULT_DEVICE,
+    DEFAULT_RESEARCHER_DEVICE,
+    KeyfobSettings,
+    ResearcherSettings,
+)
 from hal.servos.bus import open_failure
 from kasparctl.bringup.engineer import write_atomically
 from kasparctl.bringup.toml_patch import TextValue, set_text_keys
@@ -283,7 +287,7 @@ def device_rows(
 
 def _device(
     part: str,
-    settings: Any,
+    settings: KeyfobSettings | ResearcherSettings,
     press_within: float | None,
     sys_root: str,
     input_dir: str,
@@ -333,7 +337,7 @@ def _battery(part: str, node: InputNode | None, warn_below: int) -> list[Row]:
     return [Row(part, True, battery.describe())]
 
 
-def _meanings(settings: Any) -> dict[int, str]:
+def _meanings(settings: KeyfobSettings | ResearcherSettings) -> dict[int, str]:
     """Each key -> what it gives: "green", "next", or a held button's "reopen, hold: stop"."""
     words = {"press": "", "long": "hold: ", "double": "double: ", "both": "both: "}
     gestures = settings.gesture_commands()
