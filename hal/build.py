@@ -60,7 +60,7 @@ def build(
 
         # The researcher's keys typed beside the children's reach a simulated device, or
         # the keypad's own command keys; on one keyfob they are its holds.
-        twin = SimKeyfob(clock, commands=sorted(set(researcher.keys.values())))
+        twin = SimKeyfob(clock, commands=researcher.command_names())
         if own_device:
             built_researcher = twin
         device = twin if own_device else None
@@ -84,9 +84,11 @@ def build(
             if researcher.backend == "sim":
                 from hal.keyfob.sim import SimKeyfob
 
-                built_researcher = SimKeyfob(clock, commands=sorted(set(researcher.keys.values())))
+                built_researcher = SimKeyfob(clock, commands=researcher.command_names())
             else:
-                built_researcher = Keyfob(researcher, clock, role="researcher")
+                built_researcher = Keyfob(
+                    researcher, clock, role="researcher", needs=researcher.gesture_needs()
+                )
     if sim or voice.backend == "sim":
         from hal.voice.sim import SimVoice
 

@@ -43,6 +43,7 @@ COMMAND_MODULES = (
     "replicate",
     "fit_teacher",
     "import_content",
+    "keyfob",
 )
 
 
@@ -65,9 +66,13 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+# Modules whose subcommand is not their name with dashes ("import" is Python's word).
+SUBCOMMAND_OF_MODULE = {"import_content": "import"}
+
+
 def _subcommand(module: str) -> str:
     """The subcommand a module registers: its name, with dashes (fit_teacher: fit-teacher)."""
-    return module.replace("_", "-")
+    return SUBCOMMAND_OF_MODULE.get(module, module.replace("_", "-"))
 
 
 def _chosen(argv: Sequence[str]) -> str | None:

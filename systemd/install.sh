@@ -26,7 +26,7 @@ UNIT_FILE=/etc/systemd/system/$UNIT
 SYSUSERS_FILE=/etc/sysusers.d/kasparctl.conf
 MODULES_FILE=/etc/modules-load.d/kasparctl.conf
 RULES_DIR=/etc/udev/rules.d
-RULES=(99-kaspar-serial.rules 99-kaspar-keyfob.rules)
+RULES=(99-kaspar-serial.rules 99-kaspar-keyfob.rules 99-kaspar-researcher.rules)
 CONFIG_DIR=/etc/kaspar
 CONFIG=$CONFIG_DIR/kaspar.toml
 STATE_DIR=/var/lib/kaspar
@@ -188,7 +188,7 @@ install_modules() {
 }
 
 install_rules() {
-  step "stable device names for the servo buses and the keyfob (your edited rules are kept)"
+  step "stable device names for the servo buses, the keyfob and the researcher's remote (your edited rules are kept)"
   local rule
   for rule in "${RULES[@]}"; do
     if [ ! -e "$RULES_DIR/$rule" ]; then

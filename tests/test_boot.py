@@ -74,6 +74,8 @@ INSTALLED = {
     "the configuration": f"test -e {CONFIG}",
     "the sysusers file": "test -e /etc/sysusers.d/kasparctl.conf",
     "the udev rules": "test -e /etc/udev/rules.d/99-kaspar-serial.rules",
+    "the remotes' rules": "test -e /etc/udev/rules.d/99-kaspar-keyfob.rules"
+    " && test -e /etc/udev/rules.d/99-kaspar-researcher.rules",
 }
 SESSION_PATH = re.compile(
     r"sessions(/[^/]+(/(plan\.json|state\.json|records\.jsonl(\.torn)?))?)?|events\.jsonl(\.torn)?"
@@ -334,6 +336,21 @@ def test_the_service_is_ready_with_its_status(robot: Robot) -> None:
     robot.timings["ready"] = ready
     assert 0 < ready < 10, ready
     assert "ready" in robot.log_events()
+
+
+def test_check_looks_for_the_researchers_device_by_its_rule(robot: Robot) -> None:
+    """No input device can exist in the container (no uinput; the host's sysfs has none):
+    the researcher's rule is installed as shipped, `check` looks for the node it makes
+    and names it, and the running service says nothing about missing buttons."""
+    rule = "/etc/udev/rules.d/99-kaspar-researcher.rules"
+    shipped = (REPO / "systemd" / "99-kaspar-researcher.rules").read_text()
+    assert robot.machine.path(rule).read_text() == shipped
+    checked = robot.machine.run(
+        ["/opt/kasparctl/bin/kasparctl", "check", "--quiet", "--config", CONFIG], check=False
+    )
+    rows = [line for line in checked.stdout.splitlines() if line.startswith("researcher")]
+    assert rows and "/dev/input/kaspar-researcher" in rows[0], checked.stdout
+    assert not any("not connected" in event for event in robot.log_events()), robot.log_events()
 
 
 def test_the_configuration_is_readable_by_the_service_alone(robot: Robot) -> None:

@@ -100,6 +100,8 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
         (["content", "--robot", "kaspar-2", "--out", "o"], "--robot"),
         (["content", "--robot", "kaspar-3"], "--out"),
     ],
+    "keyfob list": [(["--sys", ""], "--sys")],
+    "keyfob learn": [(["researcher", "1", "--timeout", "0"], "--timeout"), (["nobody", "1"], "role")],
 }
 
 # Options whose value is any text: names the configuration defines (a profile, a group,
@@ -114,6 +116,7 @@ FREE_TEXT = {
     ("behaviour record", "--group"),
     ("say", "text"),
     ("say", "--key"),
+    ("keyfob learn", "device"),
 }
 
 
@@ -132,6 +135,7 @@ REQUIRED = {
     "report": ["--out", "r"],
     "fit-teacher": ["--out", "-"],
     "import": ["content", "--robot", "kaspar-3", "--out", "o"],
+    "keyfob learn": ["researcher", "1"],
 }
 
 
@@ -256,11 +260,15 @@ def _failures(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "replicate": (["--state-dir", nowhere, "--studies", "100"], nowhere),
         "fit-teacher": (["--state-dir", nowhere, "--out", "-"], nowhere),
         "import": ([nowhere, "--robot", "kaspar-3", "--out", str(tmp / "out"), *config], missing),
+        "keyfob learn": (["researcher", "event999", *config], "event999"),
     }
 
 
 FAILURES = set(_failures(Path("/")))
-CANNOT_FAIL = {"install": "it prints a text and reads nothing"}
+CANNOT_FAIL = {
+    "install": "it prints a text and reads nothing",
+    "keyfob list": "it lists what sysfs has, or says there is nothing",
+}
 # Failures a subcommand reports itself, as lines for the journal at error priority
 # (systemd runs `kasparctl reload` as ExecReload): no exception reaches the command line.
 REPORTED_BY_THE_COMMAND = {"reload"}
@@ -372,3 +380,11 @@ def test_a_line_naming_no_known_subcommand_is_told_every_one(
     assert exited.value.code == 2
     said = capsys.readouterr().err
     assert all(cli._subcommand(m) in said for m in cli.COMMAND_MODULES), said
+
+
+@pytest.mark.parametrize("module", cli.COMMAND_MODULES)
+def test_each_module_registers_the_subcommand_the_line_is_matched_by(module: str) -> None:
+    """A subcommand whose module the line cannot find would still run, but pay for all."""
+    parser = cli.build_parser(cli._subcommand(module))
+    actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    assert list(actions[0].choices) == [cli._subcommand(module)]

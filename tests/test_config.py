@@ -138,7 +138,8 @@ def test_check_command_exit_codes(tmp_path: Path, capsys: pytest.CaptureFixture[
     simulated = tmp_path / "sim.toml"
     # The example robot (Kaspar 3's servos) simulated throughout.
     robot = EXAMPLE.read_text().replace('backend = "real"', 'backend = "sim"', 1)
-    simulated.write_text(robot + "\n[keyfob]\nbackend = 'sim'\n[voice]\nbackend = 'sim'\n")
+    robot = robot.replace("[keyfob]\n", "[keyfob]\nbackend = 'sim'\n", 1)
+    simulated.write_text(robot + "\n[voice]\nbackend = 'sim'\n")
     assert main(["check", "--config", str(simulated)]) == 0
     table = capsys.readouterr().out
     assert f"configuration  ok    {simulated} (2 planned sessions)" in table

@@ -25,7 +25,8 @@ def test_by_default_the_researcher_has_a_device_of_their_own_and_the_paper_scrip
     config = parse_config("", "kaspar.toml")
     assert config.researcher.source == "device"
     assert config.researcher.device_path == DEFAULT_RESEARCHER_DEVICE
-    assert set(config.researcher.keys.values()) == {"next", "pause", "undo", "stop", "reopen"}
+    assert config.researcher.profile == "logitech-r400"
+    assert config.researcher.command_names() == ["next", "pause", "reopen", "stop", "undo"]
     assert config.researcher.hold_s == 3.0
     # The holds on the children's keyfob (one keyfob, or the device away): no double.
     assert config.game.commands == {"long green": "next", "long red": "pause", "both": "stop"}

@@ -30,6 +30,9 @@ def test_wheel_ships_the_phrases_and_every_package(tmp_path: Path) -> None:
     (wheel,) = tmp_path.glob("kasparctl-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
     assert "phrases/en.toml" in names
+    # The remotes' profiles, read by every configuration's [keyfob] and [researcher].
+    assert {f"hal/keyfob/remotes/{p.name}" for p in (REPO / "hal/keyfob/remotes").glob("*.toml")} <= names
+    assert "hal/keyfob/remotes/logitech-r400.toml" in names
     assert {"kasparctl/learning/learner.py", "kasparctl/config/__init__.py", "kasparctl/config/schema.py", "hal/__init__.py"} <= names
     assert not any(name.startswith("tests/") for name in names)
     entry_points = next(n for n in names if n.endswith("entry_points.txt"))

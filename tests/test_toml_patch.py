@@ -104,3 +104,25 @@ def test_values_read_back_as_written(low, high):
     after = set_joint_keys(ROBOT, "left_elbow", {"range_deg": (low, high)})
     written = tomllib.loads(after)["servos"]["joints"][1]["range_deg"]
     assert written == [float(format_value(low)), float(format_value(high))]
+
+
+def test_text_keys_are_set_in_place_and_a_dotted_table_is_appended() -> None:
+    from kasparctl.bringup.toml_patch import set_text_keys
+
+    text = '# robot\n[researcher]\n# the old remote\nname = "Old"  # by name\nhold_s = 3.0\n\n[voice]\nrate = 1\n'
+    edited = set_text_keys(text, "researcher", {"name": None, "device": "/dev/input/x", "interface": 0})
+    assert edited == (
+        '# robot\n[researcher]\n# the old remote\nhold_s = 3.0\ndevice = "/dev/input/x"\n'
+        'interface = 0\n\n[voice]\nrate = 1\n'
+    )
+    keyed = set_text_keys(edited, "researcher.keys", {"KEY_F5": "stop", "KEY_ESC": "stop"}, exact=True)
+    assert keyed.endswith('\n[researcher.keys]\nKEY_F5 = "stop"\nKEY_ESC = "stop"\n')
+    again = set_text_keys(keyed, "researcher.keys", {"KEY_A": "next"}, exact=True)
+    assert again.endswith('\n[researcher.keys]\nKEY_A = "next"\n') and "KEY_F5" not in again
+
+
+def test_a_text_value_the_patcher_could_not_edit_again_is_refused() -> None:
+    from kasparctl.bringup.toml_patch import TomlPatchError, set_text_keys
+
+    with pytest.raises(TomlPatchError, match="a '#' or a control character is not written"):
+        set_text_keys("[keyfob]\n", "keyfob", {"name": "Remote #2"})

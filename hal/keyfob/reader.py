@@ -8,10 +8,26 @@ exception that ends the iteration, and cannot express end-of-file; here a
 single reader stays registered until the device is lost, then is removed
 exactly once.
 
-Times: the kernel stamps events with the wall clock unless told otherwise,
-and the game runs on an injected clock, so each batch is anchored to
-clock.now() at the read, keeping the kernel's spacing between the events
-of the batch (which is what tells a bounce from a press when the loop was busy).
+Times: the kernel stamps events with the wall clock unless told otherwise, so
+the device is told to stamp with CLOCK_MONOTONIC (EVIOCSCLOCKID) when it is
+opened: a wall-clock step (NTP at boot, a researcher setting the date) between
+a press and its release must not make a quick green a long one. The game runs
+on an injected clock, so each batch is anchored to clock.now() at the read,
+keeping the kernel's spacing between the events of the batch (which is what
+tells a bounce from a press when the loop was busy). A kernel that refuses the
+ioctl is said in the log once per opening.
+
+Keys: each mapped key's code gives its button or command (the device's profile,
+hal.keyfob.profiles); a button that alternates keys (F5, then Esc) is held while
+any of its keys is, so it is one button. A researcher's device whose profile
+gives holds has its gestures turned into commands here (gesture_commands), so
+the game only ever sees commands from it.
+
+Opening: by path (a udev rule's stable name); when that path is missing, by the
+profile's USB ids and interface, found in sysfs; or by name, among the nodes
+that can send the mapped keys (a receiver's other node with the same name
+cannot). Never the first of several nodes in string order (event10 sorts before
+event9).
 
 Unplug: read() raises OSError(ENODEV) (a pipe in tests gives end-of-file);
 either way the reader is removed, held keys are forgotten, KeyfobLost is
@@ -28,8 +44,10 @@ import contextlib
 import ctypes
 import ctypes.util
 import errno
+import fcntl
 import os
 import struct
+import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, Protocol
@@ -39,7 +57,14 @@ import structlog
 from hal.clock import Clock
 from hal.errors import KeyfobError
 from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
-from hal.keyfob.gestures import Gesture, GestureNeeds, GestureRecognizer, GestureTimings
+from hal.keyfob.devices import InputNode, input_nodes
+from hal.keyfob.gestures import (
+    Gesture,
+    GestureKind,
+    GestureNeeds,
+    GestureRecognizer,
+    GestureTimings,
+)
 from hal.keyfob.settings import InputDeviceSettings
 
 log = structlog.get_logger("kaspar.keyfob")
@@ -47,6 +72,8 @@ log = structlog.get_logger("kaspar.keyfob")
 EV_SYN, EV_KEY = 0x00, 0x01
 SYN_REPORT, SYN_DROPPED = 0, 3
 KEY_UP, KEY_DOWN, KEY_REPEAT = 0, 1, 2
+# _IOW('E', 0xa0, int): which clock stamps this descriptor's events.
+EVIOCSCLOCKID = 0x400445A0
 
 
 class EvdevEvent(Protocol):
@@ -103,10 +130,16 @@ class EvdevDevice(Protocol):
 
 
 def open_evdev(path: str) -> EvdevDevice:
-    """Open the evdev device node `path`; OSError (ENOENT, EACCES, ...) when it cannot be."""
+    """Open the evdev device node `path`; OSError (ENOENT, EACCES, ...) when it cannot be.
+    (The reader then asks for CLOCK_MONOTONIC stamps: stamp_monotonic.)"""
     import evdev
 
     return evdev.InputDevice(path)
+
+
+def stamp_monotonic(fd: int, ioctl: Callable[[int, int, bytes], object] = fcntl.ioctl) -> None:
+    """Ask the kernel to stamp `fd`'s events with CLOCK_MONOTONIC; OSError if it refuses."""
+    ioctl(fd, EVIOCSCLOCKID, struct.pack("i", time.CLOCK_MONOTONIC))
 
 
 class Keyfob:
@@ -121,7 +154,9 @@ class Keyfob:
         needs: GestureNeeds | None = None,
         opener: Callable[[str], EvdevDevice] = open_evdev,
         input_dir: str = "/dev/input",
+        sys_root: str = "/sys",
         retry_every: float = 5.0,
+        ioctl: Callable[[int, int, bytes], object] = fcntl.ioctl,
     ) -> None:
         """Read the keyfob that `settings` names, stamping gestures with `clock`.
 
@@ -129,16 +164,24 @@ class Keyfob:
         `needs` are the gestures listened for at first (set_needs changes them);
         `opener` opens a device node (evdev's, or a test's pipe device); `input_dir`
         is watched for the keyfob's return, and looked at again every `retry_every`
-        seconds in case an inotify event was missed. Nothing is opened until start().
+        seconds in case an inotify event was missed; `sys_root` is where sysfs says which
+        node is which; `ioctl` sets the clock of an opened node (a test's stands in for
+        the kernel's). Nothing is opened until start().
         """
         self._settings = settings
         self._clock = clock
         self._log = log.bind(input=role)
         self._opener = opener
         self._input_dir = input_dir
+        self._sys_root = sys_root
+        self._ioctl = ioctl
         # Safety net under inotify: look again now and then, in case an event was missed.
         self._retry_every = retry_every
         self._key_map = settings.key_map()
+        self._ignored = settings.ignored_codes() - set(self._key_map)
+        self._gesture_commands = settings.gesture_commands()
+        # Each button's keys held now: a button that alternates keys is one button.
+        self._held: dict[str, set[int]] = {}
         commands = [name for name in self._key_map.values() if name not in ("green", "red")]
         timings = GestureTimings(
             long_press=settings.long_press,
@@ -198,6 +241,11 @@ class Keyfob:
         self._timer = self._watch = None
         self._drop_device()
 
+    def locate(self) -> EvdevDevice:
+        """The configured device, opened as the reader would open it (not grabbed, not
+        read); the caller closes it. OSError or KeyfobError when it cannot be."""
+        return self._open_device()
+
     def probe(self) -> str:
         """Open the configured keyfob once and close it: "path (name)".
 
@@ -218,9 +266,21 @@ class Keyfob:
     def _open_device(self) -> EvdevDevice:
         path = self._settings.device_path
         if path is not None:
-            return self._opener(path)
+            try:
+                return self._opener(path)
+            except FileNotFoundError:
+                node = self._by_ids(path)
+                if node is None:
+                    raise
+                return self._opener(f"{self._input_dir}/{node.node}")
         wanted = self._settings.name
-        for entry in sorted(Path(self._input_dir).glob("event*")):
+        # sysfs says what each node is without opening it; where it names none (a
+        # container, a tree of test nodes) each node is opened and asked its name.
+        node = self._best([node for node in input_nodes(self._sys_root) if node.name == wanted])
+        if node is not None:
+            return self._opener(f"{self._input_dir}/{node.node}")
+        entries = sorted(Path(self._input_dir).glob("event*"), key=_event_number)
+        for entry in entries:
             try:
                 device = self._opener(str(entry))
             except OSError:
@@ -229,6 +289,31 @@ class Keyfob:
                 return device  # kept open: opening again could race an unplug
             device.close()
         raise KeyfobError(f"no input device named {wanted!r} in {self._input_dir}")
+
+    def _by_ids(self, path: str) -> InputNode | None:
+        """The node of the profile's USB ids and interface, for a path no rule made."""
+        match = self._settings.match()
+        if match.vendor is None:
+            return None
+        found = [
+            node
+            for node in input_nodes(self._sys_root)
+            if node.vendor == match.vendor
+            and (match.product is None or node.product == match.product)
+            and (match.interface is None or node.interface == match.interface)
+        ]
+        node = self._best(found)
+        if node is not None:
+            self._log.info("keyfob found by its ids", missing=path, node=node.node)
+        return node
+
+    def _best(self, nodes: list[InputNode]) -> InputNode | None:
+        """Of several nodes, the one that can send the most mapped keys, then the kernel's
+        first (event9 before event10)."""
+        if not nodes:
+            return None
+        wanted = set(self._key_map)
+        return min(nodes, key=lambda node: (-len(wanted & node.keys), node.number))
 
     def _open(self) -> None:
         device = self._open_device()
@@ -241,6 +326,10 @@ class Keyfob:
                     # Still usable, but its keys also reach whoever else holds it.
                     self._log.warning("keyfob not grabbed", device=path, error=_describe(error))
             fd = device.fileno()
+            try:
+                stamp_monotonic(fd, self._ioctl)
+            except OSError as error:
+                self._log.warning("keyfob events stamped by the wall clock", error=_describe(error))
             asyncio.get_running_loop().add_reader(fd, self._on_readable)
         except BaseException:
             with contextlib.suppress(OSError):
@@ -290,6 +379,7 @@ class Keyfob:
                 # until the next report, so forget the holds rather than guess.
                 self._log.warning("keyfob events dropped by the kernel")
                 self._dropping = True
+                self._held.clear()
                 return self._recogniser.reset()
             if event.code == SYN_REPORT:
                 self._dropping = False
@@ -298,15 +388,34 @@ class Keyfob:
             return []
         button = self._key_map.get(event.code)
         if button is None:
-            if event.code not in self._unknown_codes:
+            if event.code not in self._unknown_codes and event.code not in self._ignored:
                 self._unknown_codes.add(event.code)
                 self._log.info("keyfob key not mapped", code=event.code)
             return []
-        return self._recogniser.key(button, event.value == KEY_DOWN, at)
+        held = self._held.setdefault(button, set())
+        was_held = bool(held)
+        if event.value == KEY_DOWN:
+            held.add(event.code)
+        else:
+            held.discard(event.code)
+        if was_held == bool(held):
+            return []  # another key of a button already held, or one never seen down
+        return self._recogniser.key(button, bool(held), at)
+
+    def _translate(self, gesture: Gesture) -> Gesture | None:
+        """A researcher device's gesture as the command its profile gives it, or None."""
+        if not self._gesture_commands or gesture.kind is GestureKind.COMMAND:
+            return gesture
+        command = self._gesture_commands.get((gesture.kind, gesture.button))
+        if command is None:
+            return None
+        return Gesture(GestureKind.COMMAND, command, gesture.at, gesture.decided)
 
     def _publish(self, gestures: list[Gesture]) -> None:
         for gesture in gestures:
-            self._events.put_nowait(gesture)
+            translated = self._translate(gesture)
+            if translated is not None:
+                self._events.put_nowait(translated)
         self._schedule()
 
     def _schedule(self) -> None:
@@ -327,6 +436,7 @@ class Keyfob:
     def _lose(self, reason: str) -> None:
         self._log.warning("keyfob lost", reason=reason)
         self._drop_device()
+        self._held.clear()
         self._publish(self._recogniser.reset())
         self._report_lost(reason)
 
@@ -452,6 +562,11 @@ class DirectoryWatch:
             async with asyncio.timeout(timeout):
                 await self._changed.wait()
         self._changed.clear()
+
+
+def _event_number(path: Path) -> int:
+    digits = path.name.removeprefix("event")
+    return int(digits) if digits.isdigit() else -1
 
 
 def _describe(error: BaseException) -> str:

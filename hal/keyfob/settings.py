@@ -22,6 +22,8 @@ from typing import Annotated, Literal, Protocol
 import msgspec
 
 from hal.errors import SettingsError
+from hal.keyfob import profiles
+from hal.keyfob.gestures import GestureKind, GestureNeeds
 
 DEFAULT_DEVICE = "/dev/input/kaspar-keyfob"
 # The researcher's own device, as systemd/99-kaspar-keyfob.rules may name it.
@@ -60,6 +62,19 @@ DevicePath = Annotated[
 ]
 # The device's name as `evtest` lists it.
 DeviceName = Annotated[str, msgspec.Meta(pattern=r"\S", extra={"expected": "a device name"})]
+# A USB vendor or product id as lsusb writes it: four hex digits.
+UsbId = Annotated[
+    str,
+    msgspec.Meta(pattern="^[0-9a-fA-F]{4}$", extra={"expected": "four hex digits such as '046d'"}),
+]
+# The USB interface whose event node carries the keys (bInterfaceNumber).
+Interface = Annotated[int, msgspec.Meta(ge=0, le=255)]
+# A device profile's name (hal/keyfob/remotes/<name>.toml).
+ProfileName = Annotated[
+    str, msgspec.Meta(pattern=r"^[a-z0-9][a-z0-9-]*$", extra={"expected": "a profile's name"})
+]
+# Below this battery level (percent) `check` and the service warn.
+BatteryPercent = Annotated[int, msgspec.Meta(ge=0, le=100, extra={"unit": "%"})]
 # A keyfob timing in seconds.
 Seconds = Annotated[float, msgspec.Meta(gt=0, le=10, extra={"unit": "s"})]
 # A researcher command's name: not one of the buttons' own names.
@@ -86,10 +101,19 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
     # name as `evtest` lists it; at most one of the two. Neither: DEFAULT_DEVICE.
     device: DevicePath | None = None
     name: DeviceName | None = None
+    # Or, with neither, found by its USB ids (and interface) when DEFAULT_DEVICE is missing;
+    # by default the profile's.
+    vendor: UsbId | None = None
+    product: UsbId | None = None
+    interface: Interface | None = None
     # Take the keys for ourselves, so a keyfob that types PAGEDOWN moves nothing else.
     grab: bool = True
-    green: str | int = "KEY_PAGEDOWN"
-    red: str | int = "KEY_PAGEUP"
+    # The device family (hal/keyfob/remotes/, docs/keyfob-and-voice.md): which keys are
+    # green and red, which alternate, which mean nothing. green and red, when given,
+    # replace the profile's.
+    profile: ProfileName = "generic-keyfob"
+    green: str | int | None = None
+    red: str | int | None = None
     # Extra keys of a bigger keypad: key -> researcher command name ("pause", "undo"...).
     commands: dict[str, CommandName] = {}
     # Held this long, a press becomes a long press, delivered when the time is reached.
@@ -104,6 +128,8 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
     # After the device node returns, how long to keep retrying while udev
     # applies its group and mode.
     reopen_grace: Annotated[float, msgspec.Meta(gt=0, le=60, extra={"unit": "s"})] = 5.0
+    # A battery the kernel reports below this is warned of (`check`).
+    battery_warn_percent: BatteryPercent = 20
 
     def __post_init__(self) -> None:
         """Device and name exclude each other, keys resolve and differ, timings are ordered.
@@ -112,7 +138,8 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
         """
         if self.device is not None and self.name is not None:
             raise SettingsError("set device or name, not both")
-        codes = {"green": _code("green", self.green), "red": _code("red", self.red)}
+        _profile("profile", self.profile)
+        codes = {"green": _code("green", self.green_key), "red": _code("red", self.red_key)}
         for key in self.commands:
             codes[f"commands.{key}"] = _code(f"commands.{key}", _number_or_name(key))
         seen: dict[int, str] = {}
@@ -135,15 +162,56 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
             return None
         return self.device or DEFAULT_DEVICE
 
+    @property
+    def green_key(self) -> str | int:
+        """The green key given, or the first key of the profile's green button."""
+        return self.green if self.green is not None else _answer_key(self.profile, "green")
+
+    @property
+    def red_key(self) -> str | int:
+        """The red key given, or the first key of the profile's red button."""
+        return self.red if self.red is not None else _answer_key(self.profile, "red")
+
     def key_map(self) -> dict[int, str]:
         """Each mapped key's evdev code -> its button ("green", "red") or command name.
 
-        Raises SettingsError for a key evdev does not know (checked at decoding too).
+        Without green and red given, every key of the profile's green and red buttons
+        (a keypad's digit and its top-row twin). Raises SettingsError for a key evdev does
+        not know (checked at decoding too).
         """
-        mapping = {key_code(self.green): "green", key_code(self.red): "red"}
+        if self.green is None and self.red is None:
+            chosen = profiles.profile(self.profile)
+            mapping = chosen.answer_map(key_code)
+        else:
+            mapping = {key_code(self.green_key): "green", key_code(self.red_key): "red"}
         for key, command in self.commands.items():
             mapping[key_code(_number_or_name(key))] = command
         return mapping
+
+    def commands_given(self) -> dict[str, str]:
+        """The extra keys' commands: `commands`, over the profile's (without green and red
+        given) presses of its other buttons."""
+        given: dict[str, str] = {}
+        if self.green is None and self.red is None:
+            chosen = profiles.profile(self.profile)
+            answers = set(chosen.answers.values())
+            for gesture, command in chosen.commands.items():
+                kind, _, button = gesture.partition(" ")
+                if kind == "press" and button not in answers:
+                    given[chosen.buttons[button][0]] = command
+        return {**given, **self.commands}
+
+    def ignored_codes(self) -> set[int]:
+        """Keys the profile's device sends that mean nothing (synthetic NumLock)."""
+        return profiles.profile(self.profile).ignored_codes(key_code)
+
+    def gesture_commands(self) -> dict[tuple[GestureKind, str], str]:
+        """None on the children's keyfob: its gestures are the game's to read."""
+        return {}
+
+    def match(self) -> profiles.Match:
+        """The USB ids (and interface) to find the device by when no path is given."""
+        return _match(self.vendor, self.product, self.interface, self.profile)
 
 
 def _code(field: str, key: str | int) -> int:
@@ -151,6 +219,34 @@ def _code(field: str, key: str | int) -> int:
         return key_code(key)
     except SettingsError as error:
         raise SettingsError(f"{field}: {error}") from None
+
+
+def _profile(field: str, name: str) -> profiles.Profile:
+    try:
+        return profiles.profile(name)
+    except SettingsError as error:
+        raise SettingsError(f"{field}: {error}") from None
+
+
+def _answer_key(name: str, slot: str) -> str:
+    chosen = profiles.profile(name)
+    button = chosen.answers.get(slot)
+    if button is None:
+        raise SettingsError(f"profile {name!r} has no {slot} button: give {slot} = a key")
+    return chosen.buttons[button][0]
+
+
+def _match(
+    vendor: str | None, product: str | None, interface: int | None, profile: str
+) -> profiles.Match:
+    if vendor is None and product is None:
+        found = profiles.profile(profile).match
+        if interface is None:
+            return found
+        return profiles.Match(found.vendor, found.product, interface)
+    return profiles.Match(
+        int(vendor, 16) if vendor else None, int(product, 16) if product else None, interface
+    )
 
 
 def _number_or_name(key: str) -> str | int:
@@ -205,18 +301,21 @@ class InputDeviceSettings(Protocol):
         """Each mapped key's evdev code -> its button or command name."""
         ...
 
+    def ignored_codes(self) -> set[int]:
+        """Keys that mean nothing, never logged as unmapped."""
+        ...
+
+    def gesture_commands(self) -> dict[tuple[GestureKind, str], str]:
+        """A researcher device's gestures -> commands; empty: gestures go out as they are."""
+        ...
+
+    def match(self) -> profiles.Match:
+        """The USB ids (and interface) to find the device by when its path is missing."""
+        ...
+
 
 # Where the researcher's commands come from (the `source` of [researcher]).
 ResearcherSource = Literal["device", "keypad", "keyfob"]
-# A presenter remote's keys (most send these), one command each at its press.
-DEFAULT_RESEARCHER_KEYS = {
-    "KEY_PAGEDOWN": "next",
-    "KEY_PAGEUP": "pause",
-    "KEY_B": "undo",
-    "KEY_ESC": "stop",
-    # A presenter's "start the slide show" key: re-open the name learned last.
-    "KEY_F5": "reopen",
-}
 # A researcher's hold on the children's keyfob: longer than any child's press.
 Hold = Annotated[float, msgspec.Meta(ge=2.0, le=10.0, extra={"unit": "s"})]
 
@@ -237,13 +336,19 @@ class ResearcherSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True
     backend: Literal["real", "sim"] = "real"
     device: DevicePath | None = None
     name: DeviceName | None = None
+    vendor: UsbId | None = None
+    product: UsbId | None = None
+    interface: Interface | None = None
     grab: bool = True
-    # Key (evdev name or number) -> command: next, pause, undo, stop, reopen.
-    keys: dict[str, CommandName] = msgspec.field(
-        default_factory=lambda: dict(DEFAULT_RESEARCHER_KEYS)
-    )
+    # The device family (hal/keyfob/remotes/, docs/keyfob-and-voice.md): its buttons and
+    # which command each press or hold gives. The default is the most common presenter.
+    profile: ProfileName = "logitech-r400"
+    # Key (evdev name or number) -> command, each at its press; given, these replace the
+    # profile's commands (`kasparctl keyfob learn` writes them).
+    keys: dict[str, CommandName] = {}
     hold_s: Hold = 3.0
     reopen_grace: Annotated[float, msgspec.Meta(gt=0, le=60, extra={"unit": "s"})] = 5.0
+    battery_warn_percent: BatteryPercent = 20
 
     def __post_init__(self) -> None:
         """Device and name exclude each other; every key resolves, each once.
@@ -252,6 +357,7 @@ class ResearcherSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True
         """
         if self.device is not None and self.name is not None:
             raise SettingsError("set device or name, not both")
+        _profile("profile", self.profile)
         seen: dict[int, str] = {}
         for key in self.keys:
             code = _code(f"keys.{key}", _number_or_name(key))
@@ -267,8 +373,41 @@ class ResearcherSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True
         return self.device or DEFAULT_RESEARCHER_DEVICE
 
     def key_map(self) -> dict[int, str]:
-        """Each key's evdev code -> its command name."""
-        return {key_code(_number_or_name(key)): command for key, command in self.keys.items()}
+        """Each key's evdev code -> its command name, or the recogniser's button ("green",
+        "red") of a profile's button that carries holds."""
+        if self.keys:
+            return {key_code(_number_or_name(k)): command for k, command in self.keys.items()}
+        return profiles.profile(self.profile).researcher_map(key_code).key_map
+
+    def gesture_needs(self) -> GestureNeeds:
+        """What the profile's buttons with holds listen for."""
+        if self.keys:
+            return GestureNeeds(both=False)
+        return profiles.profile(self.profile).researcher_map(key_code).needs
+
+    def gesture_commands(self) -> dict[tuple[GestureKind, str], str]:
+        """The profile's holds and presses of its two gesture buttons -> commands."""
+        if self.keys:
+            return {}
+        return profiles.profile(self.profile).researcher_map(key_code).gestures
+
+    def ignored_codes(self) -> set[int]:
+        """Keys the profile's device sends that mean nothing (Alt of Alt+Tab, NumLock)."""
+        return profiles.profile(self.profile).ignored_codes(key_code)
+
+    def commands_given(self) -> dict[str, str]:
+        """Each key (`keys`) or the profile's gesture ("long start") -> its command."""
+        if self.keys:
+            return dict(self.keys)
+        return dict(profiles.profile(self.profile).commands)
+
+    def command_names(self) -> list[str]:
+        """The commands this device gives, sorted (a simulated device offers these)."""
+        return sorted(set(self.commands_given().values()))
+
+    def match(self) -> profiles.Match:
+        """The USB ids (and interface) to find the device by when its path is missing."""
+        return _match(self.vendor, self.product, self.interface, self.profile)
 
     # A keypad's keys are commands given at their press: the recogniser's timings only
     # matter for gestures it never sees there, so they are the keyfob's defaults.

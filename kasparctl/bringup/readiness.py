@@ -4,7 +4,8 @@ Validates the configuration and phrases, the body's behaviours against the
 configured joints (as `behaviour check`: a bad file would leave Kaspar still in
 front of the children), pings and reads every configured servo (its
 temperature, voltage, error bits; an impossible reading fails; nothing moves on
-a powered robot), finds the keyfob, and speaks a test line. Each part gives
+a powered robot), finds the keyfob and the researcher's device (which node, its battery, a press
+within N seconds when asked), and speaks a test line. Each part gives
 rows of a table (`kasparctl check` prints it); a configuration or phrase book
 that cannot be read raises its own error first.
 """
@@ -18,7 +19,6 @@ from typing import Any
 
 from hal.clock import MonotonicClock
 from hal.servos.api import JointStatus
-from hal.servos.bus import open_failure
 from hal.servos.joints import Joints
 from hal.servos.settings import ServoSettings
 from kasparctl.body.behaviours import BehaviourError, load_library
@@ -68,9 +68,15 @@ class Robot:
             *([] if servo_backend_given(self.path) else [Result("servos", False, NO_BACKEND)]),
         ]
 
-    def hardware(self, speak: bool) -> list[Result]:
-        """The rows of the servos, keyfob and voice (the test line said aloud if `speak`)."""
-        return asyncio.run(_hardware(self.config, speak))
+    def hardware(self, speak: bool, press_within: float | None = None) -> list[Result]:
+        """The rows of the servos, keyfob, researcher's device and voice (the test line said
+        aloud if `speak`; a button of each device asked for if `press_within` seconds)."""
+        results = asyncio.run(_hardware(self.config, speak))
+        from kasparctl.bringup.remotes import device_rows
+
+        devices = [Result(r.part, r.ok, r.detail) for r in device_rows(self.config, press_within)]
+        voice = [r for r in results if r.part == "voice"]
+        return [*(r for r in results if r.part != "voice"), *devices, *voice]
 
 
 def _body(config: Config) -> list[Result]:
@@ -91,7 +97,7 @@ def _body(config: Config) -> list[Result]:
 
 
 async def _hardware(config: Config, speak: bool) -> list[Result]:
-    checks: list[Callable[[Config, bool], Any]] = [_servos, _keyfob, _voice]
+    checks: list[Callable[[Config, bool], Any]] = [_servos, _voice]
     return [result for check in checks for result in await check(config, speak)]
 
 
@@ -172,24 +178,6 @@ def _servo_row(status: JointStatus) -> Result:
     if wrong:
         detail += " - " + "; ".join(wrong)
     return Result("servos", status.healthy, detail)
-
-
-async def _keyfob(config: Config, speak: bool) -> list[Result]:
-    del speak
-    if config.keyfob.backend != "real":
-        return [Result("keyfob", True, "simulated (keyfob.backend = 'sim')")]
-    from hal.errors import HalError
-    from hal.keyfob.reader import Keyfob
-
-    try:
-        found = Keyfob(config.keyfob, MonotonicClock()).probe()
-    except (HalError, OSError) as error:
-        cause = error if isinstance(error, OSError) else error.__cause__
-        if isinstance(cause, OSError) and cause.filename:
-            found = f"cannot open {cause.filename}: {open_failure(cause)}"
-            return [Result("keyfob", False, found)]
-        return [Result("keyfob", False, f"not found: {error}")]
-    return [Result("keyfob", True, found)]
 
 
 async def _voice(config: Config, speak: bool) -> list[Result]:

@@ -210,3 +210,83 @@ def set_table(text: str, name: str, values: Mapping[str, float]) -> str:
     if not isinstance(table_values, dict) or set(table_values) != set(values):
         raise TomlPatchError(f"[{name}] does not read back with exactly its keys")
     return result
+
+
+TextValue = str | int
+
+
+def _text_value(value: TextValue) -> str:
+    if isinstance(value, bool):
+        raise TomlPatchError("booleans are not written by bring-up")
+    if isinstance(value, int):
+        return str(value)
+    if "#" in value or any(ord(c) < 0x20 for c in value):
+        # The line patcher would take a `#` for a comment when it edits the line again.
+        raise TomlPatchError(f"{value!r}: a '#' or a control character is not written")
+    return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def set_text_keys(
+    text: str, name: str, values: Mapping[str, TextValue | None], *, exact: bool = False
+) -> str:
+    """Set string or integer keys of table `[name]` (dotted names too: "researcher.keys");
+    None removes a key; `exact` removes the keys not in `values` as well. The table is
+    appended at the end when it is missing; everything else stays as written.
+
+    TomlPatchError for a key that is not a bare TOML key, a value written over several
+    lines, or a result that does not read back.
+    """
+    parts = name.split(".")
+    for key in (*parts, *values):
+        if not BARE_KEY.match(key):
+            raise TomlPatchError(f"{key!r} is not a plain name (letters, digits, _ and -)")
+    _check(text, "before editing")
+    lines = text.splitlines(keepends=False)
+    matches = [t for t in _tables(lines) if not t.array and t.header == name]
+    given = {key: value for key, value in values.items() if value is not None}
+    if not matches:
+        body = [f"{key} = {_text_value(value)}" for key, value in given.items()]
+        prefix = lines + ([""] if lines and lines[-1].strip() else [])
+        result = "\n".join([*prefix, f"[{name}]", *body]) + "\n"
+    else:
+        table = matches[0]
+        present = _keys(lines, table)
+        changes: dict[str, str | None] = {}
+        if exact:
+            changes.update({key: None for key in set(present) - set(values)})
+        changes.update({k: None if v is None else _text_value(v) for k, v in values.items()})
+        result = "\n".join(_set_raw(lines, table, changes)) + "\n"
+    parsed: object = _check(result, f"[{name}]")
+    for part in parts:
+        parsed = parsed.get(part) if isinstance(parsed, dict) else None
+    if not isinstance(parsed, dict):
+        raise TomlPatchError(f"[{name}] does not read back as a table")
+    for key, value in values.items():
+        if parsed.get(key) != value:
+            raise TomlPatchError(f"[{name}] {key} reads back as {parsed.get(key)!r}")
+    if exact and set(parsed) != set(given):
+        raise TomlPatchError(f"[{name}] does not read back with exactly its keys")
+    return result
+
+
+def _set_raw(lines: list[str], table: _Table, values: Mapping[str, str | None]) -> list[str]:
+    """As _set_keys, for values already written as TOML text."""
+    keys = _keys(lines, table)
+    out = list(lines)
+    removed = {keys[key] for key, value in values.items() if value is None and key in keys}
+    missing = []
+    for key, value in values.items():
+        if value is None:
+            continue
+        index = keys.get(key)
+        if index is None:
+            missing.append(f"{key} = {value}")
+            continue
+        match = _KEY.match(lines[index])
+        assert match is not None
+        out[index] = f"{match.group('indent')}{key} = {value}{match.group('comment') or ''}"
+    if missing:
+        last_key = max((i for i in keys.values() if i not in removed), default=table.start)
+        out[last_key + 1 : last_key + 1] = missing
+        removed = {i if i <= last_key else i + len(missing) for i in removed}
+    return [line for i, line in enumerate(out) if i not in removed]

@@ -4,7 +4,8 @@ Validates the configuration and phrases, the body's behaviours against the
 configured joints (as `behaviour check`: a bad file would leave Kaspar still in
 front of the children), pings and reads every configured servo (its
 temperature, voltage, error bits; an impossible reading fails; nothing moves on
-a powered robot), finds the keyfob, and speaks a test line. Usable
+a powered robot), finds the keyfob and the researcher's device (with --press, a button of each
+within SECONDS), and speaks a test line. Usable
 over ssh by an engineer; exit 1 when anything is wrong.
 """
 
@@ -15,7 +16,7 @@ import sys
 from typing import Any
 
 from kasparctl.bringup.readiness import Result, Robot
-from kasparctl.commands.arguments import path
+from kasparctl.commands.arguments import number, path
 from kasparctl.config import default_config_path
 from kasparctl.log import configure_logging
 
@@ -32,6 +33,13 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--quiet", action="store_true", help="do not speak the test line (check the voice silently)"
     )
+    parser.add_argument(
+        "--press",
+        type=number(1.0, 600.0),
+        default=None,
+        metavar="SECONDS",
+        help="ask for a button of the keyfob and of the researcher's device, each within SECONDS",
+    )
     parser.set_defaults(run=run)
 
 
@@ -41,7 +49,10 @@ def run(arguments: argparse.Namespace) -> int:
     # Errors only: the table says what is wrong, once per part (a bus's retries would
     # repeat its adapter's row).
     configure_logging("error", "console", stream=sys.stderr)
-    results = [*robot.settings(), *robot.hardware(speak=not arguments.quiet)]
+    results = [
+        *robot.settings(),
+        *robot.hardware(speak=not arguments.quiet, press_within=arguments.press),
+    ]
     _print_table(results)
     return 0 if all(result.ok for result in results) else 1
 

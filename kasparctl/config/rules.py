@@ -278,9 +278,10 @@ def _check_researcher(config: Config, fail: _Fail) -> None:
     """The researcher's commands: each a command, the ones a session needs all there."""
     researcher = config.researcher
     if researcher.source == "device":
-        keys, where = researcher.keys, "researcher.keys"
+        keys = researcher.commands_given()
+        where = "researcher.keys" if researcher.keys else "researcher.profile"
     elif researcher.source == "keypad":
-        keys, where = config.keyfob.commands, "keyfob.commands"
+        keys, where = config.keyfob.commands_given(), "keyfob.commands"
     else:
         keys, where = {}, ""
     for key, command in keys.items():

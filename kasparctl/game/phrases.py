@@ -161,6 +161,7 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
         "fault.keyfob_back": _spec(about="the children's keyfob is back"),
         "fault.researcher_lost": _spec(about="the researcher's keypad is gone"),
         "fault.researcher_back": _spec(about="the researcher's keypad is back"),
+        "fault.battery_low": _spec(about="a remote's battery is below its warning level"),
         "fault.problem": _spec(about="any other fault"),
         "fault.storage": _spec(about="the records cannot be saved: a grown-up must stop"),
         "session.abandoned": _spec(about="an unfinished session could not be resumed"),

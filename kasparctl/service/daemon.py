@@ -70,6 +70,7 @@ from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, EventLog, is_finishe
 from kasparctl.game.stages import ENDS
 from kasparctl.game.storage import StorageFailed
 from kasparctl.log import configure_logging
+from kasparctl.service.batteries import low_batteries
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
 from kasparctl.service.sdnotify import Notifier, watchdog_interval
 from kasparctl.service.status import STATUS_WORDS, recovery_words, status_line
@@ -153,6 +154,9 @@ class Daemon:
         # A session abandoned at the last read: shown in STATUS= until the next one opens.
         self._notice: str | None = None
         self._say_abandoned = False
+        # A remote's battery below its warning level at the start: STATUS=, said once.
+        self._batteries: str | None = None
+        self._say_batteries = False
 
     def _load(self) -> Config:
         """The configuration, as a robot the game is played on; ConfigError otherwise.
@@ -280,6 +284,11 @@ class Daemon:
         await self.hw.keyfob.start()
         if self.hw.researcher is not None:
             await self.hw.researcher.start()
+        if not self.options.sim:
+            self._batteries = low_batteries(self.config)
+            if self._batteries:
+                log.warning("battery low", batteries=self._batteries)
+                self._say_batteries = True
         await self._open_body()
 
     async def _open_body(self) -> None:
@@ -361,6 +370,9 @@ class Daemon:
         if self._say_abandoned:
             self._say_abandoned = False
             game.speech.announce_soon("session.abandoned")
+        if self._say_batteries:
+            self._say_batteries = False
+            game.speech.announce_soon("fault.battery_low")
         return game
 
     async def _play(self, game: Game) -> None:
@@ -389,7 +401,8 @@ class Daemon:
     def _status(self, game: Game) -> str:
         """STATUS=: the stage, Kaspar confused (and what reopen would do), the problems."""
         confused = recovery_words(game.session_state, game.settings)
-        return status_line(game.stage, game.problems, self._notice, confused)
+        notices = " | ".join(n for n in (self._notice, self._batteries) if n) or None
+        return status_line(game.stage, game.problems, notices, confused)
 
     def _on_game_event(self, event: GameEvent, info: dict[str, Any]) -> None:
         game = self.game

@@ -334,7 +334,7 @@ def assemble(
 
     researcher = None
     if config.researcher.source == "device":
-        researcher = SimKeyfob(clock, commands=sorted(set(config.researcher.keys.values())))
+        researcher = SimKeyfob(clock, commands=config.researcher.command_names())
     # A keypad's command keys are keys of the children's keypad.
     keypad = (
         sorted(set(config.keyfob.commands.values()))
