@@ -240,8 +240,13 @@ def test_check_passes_on_each_profile_with_its_buses_on_the_emulators(profile, t
     text = path.read_text()
     for bus in servos.buses:
         text = text.replace(f'port = "{bus.port}"', f'port = "{emulators[bus.name].path}"', 1)
-    if "\n[keyfob]" not in text:
-        text += "\n[keyfob]\nbackend = 'sim'\n[voice]\nbackend = 'sim'\n"
+    # The servos are what this checks: the input devices and the voice are simulated.
+    if "\n[keyfob]\n" in text:
+        text = text.replace("\n[keyfob]\n", "\n[keyfob]\nbackend = 'sim'\n", 1)
+    else:
+        text += "\n[keyfob]\nbackend = 'sim'\n"
+    if "\n[voice]\n" not in text:
+        text += "\n[voice]\nbackend = 'sim'\n"
     path.write_text(text)
     try:
         code = main(["check", "--config", str(path), "--quiet"])
