@@ -20,7 +20,7 @@ from typing import Any
 
 import msgspec
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from reading_check import Readers, research_agrees
 from research_fixtures import Scenario, cut_after_trial
@@ -461,6 +461,9 @@ class Played:
     st.sampled_from(["names", "never"]),
     st.integers(0, 2**16),
 )
+# Found on Debian 12: a name re-opened and never asked again, the game ended; the
+# report counted it learned (its last trial said so) where the records do not.
+@example(actions=["right", "right", "wrong", "wrong", "wrong", "reopen"], exclude="names", seed=253)
 def test_every_reader_agrees_after_every_record_of_any_game(
     actions: list[str], exclude: str, seed: int
 ) -> None:

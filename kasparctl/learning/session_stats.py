@@ -16,7 +16,7 @@ follows.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -129,12 +129,18 @@ class ProblemBuilder:
             tuple(trial.q_after),
         )
 
-    def problems(self) -> list[ProblemRecord]:
-        """One ProblemRecord per target the session guessed at, in the order it did."""
+    def problems(self, learned: Mapping[int, int] | None = None) -> list[ProblemRecord]:
+        """One ProblemRecord per target the session guessed at, in the order it did.
+
+        `learned` (target -> label), the records' reading of what the session ended with,
+        decides what each problem learned; without it, each target's last trial does (a
+        name re-opened after it and never asked again would count as learned).
+        """
         toys = self.toys
         problems = []
         for target, trials in self._trials.items():
-            learned, offered, last_q = self._last[target]
+            last_learned, offered, last_q = self._last[target]
+            learned_label = last_learned if learned is None else learned.get(target)
             candidates = np.array([toy in offered for toy in toys])
             if not candidates.any():
                 # A record naming none of the session's toys: over all of them.
@@ -149,7 +155,7 @@ class ProblemBuilder:
                     target=target,
                     answer=answer,
                     trials=tuple(trials),
-                    learned=learned,
+                    learned=learned_label,
                     final_q=tuple(float(q) for q in q_after),
                     entropy_after=entropy_bits(softmax(q_after, self.params.beta, candidates)),
                     candidates=self._candidates[target],

@@ -140,7 +140,9 @@ def _collect(
     toys = session.toys
     builder = ProblemBuilder(toys, session.answer_key, params(session.profile), group=index)
     feedback = condition.feedback_by_cluster.setdefault(cluster, Feedback())
+    ended_with = None
     for walked in walk(session):
+        ended_with = walked.facts
         record, child = walked.record, walked.child_index
         if isinstance(record, TrialRecord):
             if walked.undone:
@@ -167,7 +169,10 @@ def _collect(
                 measures.extra_presses += 1
             elif isinstance(record, UndoRecord):
                 measures.undos += 1
-    condition.problems.extend(Problem(toys, record, cluster) for record in builder.problems())
+    learned = None if ended_with is None else ended_with.learned
+    condition.problems.extend(
+        Problem(toys, record, cluster) for record in builder.problems(learned)
+    )
 
 
 def pooled(conditions: Sequence[Condition], label: str = "all") -> Condition:

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from kasparctl.game.fold import AFTER_WRONG_FEEDBACK, EXPLORATORY, UNKNOWN, Guess, Reading
+from kasparctl.game.fold import AFTER_WRONG_FEEDBACK, EXPLORATORY, UNKNOWN, Facts, Guess, Reading
 from kasparctl.game.records import (
     AnyRecord,
     PressRecord,
@@ -48,6 +48,9 @@ class Walked:
     undone: bool = False
     # A trial as the records read when it was answered (kasparctl.game.fold).
     guess: Guess | None = None
+    # What the records read once this one is applied: after the last record, what the
+    # session ended with (a name re-opened and never asked again is not learned).
+    facts: Facts = field(default_factory=Facts)
 
     @property
     def cause(self) -> str | None:
@@ -73,16 +76,18 @@ def walk(session: SessionData) -> Iterator[Walked]:
             if len(recent) > _RECENT_TRIALS:
                 recent.popitem(last=False)
             turn += 1
-            yield Walked(record, record.child_index, record.trial in undone, guess)
+            yield Walked(record, record.child_index, record.trial in undone, guess, reading.facts)
         elif isinstance(record, UndoRecord):
             turn -= 1
-            yield Walked(record, recent.get(record.trial))
+            yield Walked(record, recent.get(record.trial), facts=reading.facts)
         elif isinstance(record, PressRecord):
             extra = record.extra is True and isinstance(record.trial, int)
-            yield Walked(record, recent.get(record.trial) if extra else None)  # type: ignore[arg-type]
+            yield Walked(  # type: ignore[arg-type]
+                record, recent.get(record.trial) if extra else None, facts=reading.facts
+            )
         elif isinstance(record, PromptRecord):
-            yield Walked(record, turn % size if step == "guessing" else None)
+            yield Walked(record, turn % size if step == "guessing" else None, facts=reading.facts)
         else:
             if isinstance(record, StepRecord):
                 step = record.to
-            yield Walked(record)
+            yield Walked(record, facts=reading.facts)
