@@ -82,9 +82,8 @@ def walk(session: SessionData) -> Iterator[Walked]:
             yield Walked(record, recent.get(record.trial), facts=reading.facts)
         elif isinstance(record, PressRecord):
             extra = record.extra is True and isinstance(record.trial, int)
-            yield Walked(  # type: ignore[arg-type]
-                record, recent.get(record.trial) if extra else None, facts=reading.facts
-            )
+            child = recent.get(record.trial) if extra else None  # type: ignore[arg-type]
+            yield Walked(record, child, facts=reading.facts)
         elif isinstance(record, PromptRecord):
             yield Walked(record, turn % size if step == "guessing" else None, facts=reading.facts)
         else:
