@@ -506,7 +506,8 @@ class Joints:
                 statuses.append(JointStatus(joint.name, None, bool(joint.torque), fault=fault))
                 continue
             if health.kind is not None and fault is None:
-                fault = Fault(joint.name, health.kind, ", ".join(health.flags), self.clock.now())
+                detail = health.detail or ", ".join(health.flags)
+                fault = Fault(joint.name, health.kind, detail, self.clock.now())
             position, problems = self._judge(joint, raw, health)
             statuses.append(
                 JointStatus(
@@ -520,6 +521,8 @@ class Joints:
                     raw_position=raw,
                     flags=health.flags,
                     problems=tuple(problems),
+                    stored_limits=health.stored_limits,
+                    active_limits=health.active_limits,
                 )
             )
         return statuses
@@ -582,7 +585,7 @@ class Joints:
                 detail = impossible_reading(joint.settings, position)
                 self._repeat(joint.name, FaultKind.IMPOSSIBLE.value, detail)
                 await self._latch(joint.name, FaultKind.IMPOSSIBLE, detail)
-            kind, detail = health.kind, ", ".join(health.flags)
+            kind, detail = health.kind, health.detail or ", ".join(health.flags)
             limit = self.settings.max_temperature_c
             hot = health.temperature_c
             if kind is None and hot is not None and hot >= limit:

@@ -11,7 +11,7 @@ from typing import Any
 
 from hal.clock import MonotonicClock
 from hal.errors import BusError
-from hal.servos.api import JointStatus
+from hal.servos.api import JointStatus, ServoLimits
 from hal.servos.bus import SerialBus
 from hal.servos.drivers import DRIVERS
 from hal.servos.joints import Joints
@@ -75,7 +75,31 @@ async def read_joints(config_path: str) -> list[dict[str, Any]]:
     finally:
         await joints.close()
     by_name = {j.name: j for j in settings.joints}
-    return [status_row(s, by_name[s.joint]) for s in statuses]
+    rows = [status_row(s, by_name[s.joint]) for s in statuses]
+    battery = settings.battery
+    for row in rows:
+        if battery is not None and row["joint"] == battery.joint:
+            volts = row["voltage_v"]
+            row["battery"] = {
+                "voltage_v": volts,
+                "warn_below_v": battery.warn_below_v,
+                "low": volts is not None and volts < battery.warn_below_v,
+            }
+    return rows
+
+
+def format_battery(rows: list[dict[str, Any]]) -> str | None:
+    """The battery line of `servos read`, or None when no [servos.battery] is configured."""
+    for row in rows:
+        battery = row.get("battery")
+        if battery is None:
+            continue
+        volts = battery["voltage_v"]
+        reading = "not read" if volts is None else f"{volts:.1f} V"
+        low = "  LOW" if battery["low"] else ""
+        return (f"battery {reading} (read by {row['joint']}; "
+                f"warning below {battery['warn_below_v']:.1f} V){low}")
+    return None
 
 
 def status_row(status: JointStatus, joint: JointSettings) -> dict[str, Any]:
@@ -95,9 +119,28 @@ def status_row(status: JointStatus, joint: JointSettings) -> dict[str, Any]:
         "temperature_c": None if status.temperature_c is None else round(status.temperature_c, 1),
         "voltage_v": None if status.voltage_v is None else round(status.voltage_v, 1),
         "flags": list(status.flags),
+        "limits_eep": _limits(status.stored_limits),
+        "limits_ram": _limits(status.active_limits),
         "problems": problems,
         "status": "ok" if status.healthy else "; ".join(problems),
     }
+
+
+def _limits(limits: ServoLimits | None) -> dict[str, float | None] | None:
+    if limits is None:
+        return None
+    hot = limits.max_temperature_c
+    return {
+        "max_temperature_c": None if hot is None else round(hot, 2),
+        "min_voltage_v": round(limits.min_voltage_v, 2),
+        "max_voltage_v": round(limits.max_voltage_v, 2),
+    }
+
+
+def _limits_text(limits: dict[str, float | None]) -> str:
+    hot = limits["max_temperature_c"]
+    return (f"{'?' if hot is None else f'{hot:.0f}'} C, "
+            f"{limits['min_voltage_v']:.1f}-{limits['max_voltage_v']:.1f} V")
 
 
 def format_row(row: dict[str, Any]) -> str:
@@ -106,15 +149,21 @@ def format_row(row: dict[str, Any]) -> str:
     position = "   --  " if row["position_deg"] is None else f"{row['position_deg']:7.1f}"
     if row["raw_position"] is not None and "position reading" in impossible:
         position = f"!{row['raw_position']:>6}"
-    temperature = "" if row["temperature_c"] is None else f"{row['temperature_c']:.0f} C"
+    temperature = "" if row["temperature_c"] is None else f"{row['temperature_c']:.1f} C"
     if temperature and "temperature" in impossible:
         temperature = "!" + temperature
     voltage = "" if row["voltage_v"] is None else f"{row['voltage_v']:.1f} V"
     if voltage and "voltage" in impossible:
         voltage = "!" + voltage
+    limits = ""
+    if row.get("limits_eep") is not None:
+        limits += f"  [EEP 11-13: {_limits_text(row['limits_eep'])}"
+        if row.get("limits_ram") is not None:
+            limits += f"; RAM 5-7: {_limits_text(row['limits_ram'])}"
+        limits += "]"
     return (
         f"{row['joint']:<20} {row['bus']:<6} id {row['id']:3d} {position} deg "
-        f"{temperature:>6} {voltage:>7}  {row['status']}"
+        f"{temperature:>7} {voltage:>7}  {row['status']}{limits}"
     )
 
 

@@ -10,7 +10,7 @@ from typing import Any
 
 from hal.servos.drivers import DRIVERS
 from hal.servos.settings import BAUD_RATES
-from kasparctl.bringup.servos import DEFAULT_IDS, format_row, read_joints, scan
+from kasparctl.bringup.servos import DEFAULT_IDS, format_battery, format_row, read_joints, scan
 from kasparctl.commands.arguments import number, path, whole, whole_ranges
 from kasparctl.log import configure_logging
 
@@ -89,4 +89,7 @@ def run_read(arguments: argparse.Namespace) -> int:
     else:
         for row in rows:
             print(format_row(row))
+        battery = format_battery(rows)
+        if battery is not None:
+            print(battery)
     return 0 if all(row["status"] == "ok" for row in rows) else 1
