@@ -8,6 +8,7 @@ stale bit is cleared once, while a real under-voltage stays a fault.
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import pytest
@@ -37,7 +38,7 @@ def test_the_table_has_one_rising_entry_per_raw_value_and_none_for_0xff():
     table = hx.TEMPERATURE_CENTI_C
     assert len(table) == 255  # 0x00-0xFE
     # 205 printed as 68.61 in one copy would break this: it is out of sequence.
-    assert all(a < b for a, b in zip(table, table[1:], strict=False))
+    assert all(a < b for a, b in itertools.pairwise(table))
     with pytest.raises(hx.HerkulexError, match="0xff is not a reading"):
         hx.temperature_c(0xFF)
     assert hx.raw_temperature(25.2) == 128 and hx.raw_temperature(62.63) == 200

@@ -610,7 +610,7 @@ class HerkulexDriver(BusDriver):
                 await self.bus.transact(hx.voltage_limits_write(servo_id, low_v, high_v, eep=True))
 
     async def read_eep(self, servo_id: int, address: int, length: int) -> bytes:
-        """`length` bytes of the servo's EEP from `address` (ServoSilent when it does not answer)."""
+        """`length` bytes of EEP from `address`; ServoSilent when the servo does not answer."""
         return (await self._read(servo_id, address, length, eep=True)).read_value()[1]
 
     async def write_id(self, servo_id: int, new_id: int) -> None:
