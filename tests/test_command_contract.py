@@ -72,6 +72,11 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
         (["--port", "/dev/null", "--protocol", "herkulex", "--baud", "12"], "--baud"),
     ],
     "servos read": [([], "--config")],
+    "servos set-id": [
+        (["--port", "/dev/null"], "--new-id"),
+        (["--port", "/dev/null", "--new-id", "254"], "--new-id"),
+        (["--port", "/dev/null", "--new-id", "3", "--id", "x"], "--id"),
+    ],
     "servos calibrate": [
         ([], "--config"),
         (["--config", "k.toml", "--joints", "a", "--group", "b"], "--group"),
@@ -117,6 +122,7 @@ REQUIRED = {
     "install": ["--print"],
     "servos scan": ["--port", "/dev/null", "--protocol", "maestro"],
     "servos read": ["--config", "k.toml"],
+    "servos set-id": ["--port", "/dev/null", "--new-id", "3"],
     "servos calibrate": ["--config", "k.toml"],
     "pose record": ["happy"],
     "pose play": ["happy"],
@@ -235,6 +241,7 @@ def _failures(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "reload": (["--pid", "4194303", "--runtime-dir", str(tmp)], "cannot ask process 4194303"),
         "servos scan": (["--port", nowhere, "--protocol", "maestro"], nowhere),
         "servos read": (config, missing),
+        "servos set-id": (["--port", nowhere, "--new-id", "3"], nowhere),
         "servos calibrate": (config, missing),
         "pose record": (["happy", *config], missing),
         "pose play": (["happy", *config], missing),

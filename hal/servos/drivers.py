@@ -45,6 +45,7 @@ class BusDriver(abc.ABC):
     """
 
     framing: Framing  # how the protocol's replies are cut out of the byte stream
+    id_range: tuple[int, int]  # the ids (channels) a servo can have, as the codec states them
 
     def __init__(self, bus: SerialBus) -> None:
         """Drive the servos on `bus`; the bus is started and closed with the driver."""
@@ -86,6 +87,10 @@ class BusDriver(abc.ABC):
         """Whether a servo answers at all, in the protocol's shortest exchange (a scan's)."""
         return await self.ping(servo_id) is not None
 
+    async def answering(self, ids: Sequence[int]) -> list[int]:
+        """Those of `ids` that answer, asked one after another (a scan)."""
+        return [servo_id for servo_id in ids if await self.answers(servo_id)]
+
     @abc.abstractmethod
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
         """Present raw positions; ServoSilent names the first servo that did not answer."""
@@ -121,6 +126,7 @@ class Dynamixel1Driver(BusDriver):
     """AX-12A servos on Dynamixel Protocol 1.0."""
 
     framing = Framing(dx1.HEAD_SIZE, dx1.packet_length)
+    id_range = dx1.ID_RANGE
 
     def _status(self, servo_id: int, length: int) -> Callable[[list[bytes]], dx1.Status]:
         def decode(packets: list[bytes]) -> dx1.Status:
@@ -211,6 +217,7 @@ class Dynamixel2Driver(BusDriver):
     """X series servos (XL430) on Dynamixel Protocol 2.0."""
 
     framing = Framing(dx2.HEAD_SIZE, dx2.packet_length)
+    id_range = dx2.ID_RANGE
 
     def _status(self, servo_id: int, length: int) -> Callable[[list[bytes]], dx2.Status]:
         def decode(packets: list[bytes]) -> dx2.Status:
@@ -345,6 +352,7 @@ class HerkulexDriver(BusDriver):
     """
 
     framing = Framing(hx.HEAD_SIZE, hx.packet_length)
+    id_range = hx.ID_RANGE
 
     def __init__(self, bus: SerialBus, voltage_limits: tuple[float, float] | None = None) -> None:
         """Drive the HerkuleX servos on `bus`; nothing is sent before start()."""
@@ -424,6 +432,18 @@ class HerkulexDriver(BusDriver):
         except ServoSilent:
             return False
         return True
+
+    async def answering(self, ids: Sequence[int]) -> list[int]:
+        """One STAT per id, all in one hand-off to the bus thread: a scan of 254 ids."""
+        exchanges = [
+            Exchange(hx.stat(i), 1, self.framing, self._ack(i, hx.Command.STAT), 9) for i in ids
+        ]
+        outcomes = await self.bus.exchange_all(exchanges)
+        for outcome in outcomes:
+            if isinstance(outcome, PortUnavailable):
+                raise outcome
+        return [i for i, outcome in zip(ids, outcomes, strict=True)
+                if not isinstance(outcome, Exception)]
 
     async def ping(self, servo_id: int) -> int | None:
         """STAT (answered at every ACK policy), then the model number; None when silent.
@@ -628,6 +648,7 @@ class MaestroDriver(BusDriver):
     """Hobby servos on a Pololu Maestro's channels (compact protocol); ids are channels."""
 
     framing = Framing(2, lambda head: 2)
+    id_range = mo.ID_RANGE
 
     async def ping(self, servo_id: int) -> int | None:
         """Get Errors; 0 (a Maestro has no model number), or None when unanswered."""

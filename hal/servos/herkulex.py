@@ -27,6 +27,8 @@ from hal.errors import CodecError
 HEADER = b"\xff\xff"
 BROADCAST_ID = 0xFE
 MAX_ID = 0xFD
+ID_RANGE = (0, MAX_ID)  # the ids a servo can have; a new one answers at FACTORY_ID
+FACTORY_ID = 0xFD  # manual: every servo leaves the factory as 253
 HEAD_SIZE = 3  # FF FF SIZE
 MIN_SIZE = 7
 MAX_SIZE = 223

@@ -11,49 +11,133 @@ from typing import Any
 
 from hal.clock import MonotonicClock
 from hal.errors import BusError
+from hal.servos import herkulex as hx
 from hal.servos.api import JointStatus, ServoLimits
 from hal.servos.bus import SerialBus
-from hal.servos.drivers import DRIVERS
+from hal.servos.drivers import DRIVERS, BusDriver, HerkulexDriver
 from hal.servos.joints import Joints
 from hal.servos.settings import JointSettings, model_named
 from hal.servos.sim import SimServos
+from kasparctl.bringup.engineer import BringUpError
 from kasparctl.config import load_config
 
-# The ids a scan tries by default, per protocol (channels on a Maestro).
-DEFAULT_IDS = {
-    "dynamixel1": (1, 30),
-    "dynamixel2": (1, 30),
-    "herkulex": (0, 30),
-    "maestro": (0, 11),
+# The ids a scan tries by default, per protocol (channels on a Maestro): every id the
+# protocol allows, as its codec states it (a factory-new HerkuleX answers at 253).
+DEFAULT_IDS: dict[str, tuple[int, int]] = {
+    protocol: driver.id_range for protocol, driver in DRIVERS.items()
 }
+# Reply time allowed beyond the wire time while scanning: a servo answers within a
+# millisecond or two, and most ids of a scan are missing, each costing one timeout.
+SCAN_MARGIN_MS = 10.0
+# How long a HerkuleX may take to boot after REBOOT before its new id must answer.
+REBOOT_WAIT_S = 3.0
+REBOOT_POLL_S = 0.05
+
+
+async def _open(port: str, protocol: str, baud: int, margin: float) -> BusDriver:
+    # No retries: a missing id costs one timeout, and most ids are missing.
+    bus = SerialBus("scan", port, baud, timeout_margin=margin, retries=0)
+    driver = DRIVERS[protocol](bus)
+    await driver.start()
+    if not bus.connected:
+        await driver.close()
+        raise BusError(bus.unavailable())
+    return driver
+
+
+async def _found(driver: BusDriver, protocol: str, ids: list[int]) -> list[dict[str, Any]]:
+    """Who answers among `ids` (the protocol's shortest exchange), then each one's model."""
+    answering = await driver.answering(ids)
+    found = []
+    for servo_id in answering:
+        model_number = await driver.ping(servo_id)
+        if model_number is None:
+            continue  # answered once, then not: a flaky link, not a servo to name
+        position = (await driver.read_positions([servo_id]))[servo_id]
+        name = model_named(model_number, protocol) or (
+            "maestro" if protocol == "maestro" else f"model {model_number}"
+        )
+        found.append(
+            {"id": servo_id, "model": name, "model_number": model_number, "position": position}
+        )
+    return found
 
 
 async def scan(
     port: str, protocol: str, baud: int, ids: list[int], margin: float
 ) -> list[dict[str, Any]]:
-    """Ping every id on one port; one row (id, model number, model) per servo that answers."""
-    # No retries: a missing id costs one timeout, and most ids are missing.
-    bus = SerialBus("scan", port, baud, timeout_margin=margin, retries=0)
-    driver = DRIVERS[protocol](bus)
-    await driver.start()
-    found = []
+    """Ping every id on one port; one row (id, model number, model) per servo that answers.
+
+    Each id is asked once in the protocol's shortest exchange (HerkuleX: STAT); only
+    those that answer are asked their model and position. Nothing moves.
+    """
+    driver = await _open(port, protocol, baud, margin)
     try:
-        if not bus.connected:
-            raise BusError(bus.unavailable())
-        for servo_id in ids:
-            model_number = await driver.ping(servo_id)
-            if model_number is None:
-                continue
-            position = (await driver.read_positions([servo_id]))[servo_id]
-            name = model_named(model_number, protocol) or (
-                "maestro" if protocol == "maestro" else f"model {model_number}"
-            )
-            found.append(
-                {"id": servo_id, "model": name, "model_number": model_number, "position": position}
-            )
+        return await _found(driver, protocol, ids)
     finally:
         await driver.close()
-    return found
+
+
+def _listed(found: list[dict[str, Any]]) -> str:
+    return ", ".join(f"{s['id']} ({s['model']})" for s in found) or "no servo"
+
+
+async def set_id(
+    port: str, baud: int, servo_id: int, new_id: int, margin: float
+) -> dict[str, Any]:
+    """Give the HerkuleX servo at `servo_id` the id `new_id`: EEP 6, read back, reboot, rescan.
+
+    The whole bus is scanned first: BringUpError when nothing answers at `servo_id`,
+    or when `new_id` is taken (both name what was found). Returns the id's change and
+    the bus as scanned after the reboot.
+    """
+    low, high = DEFAULT_IDS["herkulex"]
+    if not low <= new_id <= high or new_id == servo_id:
+        raise BringUpError(f"the new id must be {low}-{high} and not {servo_id}, found {new_id}")
+    driver = await _open(port, "herkulex", baud, margin)
+    assert isinstance(driver, HerkulexDriver)
+    everything = list(range(low, high + 1))
+    try:
+        before = await _found(driver, "herkulex", everything)
+        ids = {s["id"]: s for s in before}
+        if servo_id not in ids:
+            raise BringUpError(
+                f"no servo answers at id {servo_id} on {port} ({baud} baud); "
+                f"found: {_listed(before)}"
+            )
+        if new_id in ids:
+            taken = ids[new_id]
+            raise BringUpError(
+                f"id {new_id} is already on the bus ({taken['model']} at position "
+                f"{taken['position']}): two servos with one id would answer together; "
+                f"found: {_listed(before)}"
+            )
+        await driver.write_id(servo_id, new_id)
+        written = (await driver.read_eep(servo_id, hx.Eep.ID, 1))[0]
+        if written != new_id:
+            raise BringUpError(
+                f"servo {servo_id} holds id {written} in EEP 6 after the write of {new_id}: "
+                "nothing rebooted; check the wiring and try again"
+            )
+        await driver.reboot(servo_id)
+        clock = MonotonicClock()
+        deadline = clock.now() + REBOOT_WAIT_S
+        while not await driver.answers(new_id):
+            if clock.now() >= deadline:
+                raise BringUpError(
+                    f"servo {servo_id} took id {new_id} in EEP but does not answer at it "
+                    f"{REBOOT_WAIT_S:.0f} s after its reboot: power it off and on, then scan"
+                )
+            await clock.sleep(REBOOT_POLL_S)
+        after = await _found(driver, "herkulex", everything)
+    finally:
+        await driver.close()
+    if not any(s["id"] == new_id for s in after) or any(s["id"] == servo_id for s in after):
+        raise BringUpError(
+            f"after the reboot the bus has {_listed(after)}, expected id {new_id} "
+            f"in place of {servo_id}"
+        )
+    return {"id": servo_id, "new_id": new_id, "eep_id": written, "found": after}
 
 
 async def read_joints(config_path: str) -> list[dict[str, Any]]:

@@ -9,14 +9,23 @@ import sys
 from typing import Any
 
 from hal.servos.drivers import DRIVERS
+from hal.servos.herkulex import FACTORY_ID
 from hal.servos.settings import BAUD_RATES
-from kasparctl.bringup.servos import DEFAULT_IDS, format_battery, format_row, read_joints, scan
+from kasparctl.bringup.servos import (
+    DEFAULT_IDS,
+    SCAN_MARGIN_MS,
+    format_battery,
+    format_row,
+    read_joints,
+    scan,
+    set_id,
+)
 from kasparctl.commands.arguments import number, path, whole, whole_ranges
 from kasparctl.log import configure_logging
 
 
 def register(subparsers: Any) -> None:
-    """Add the `servos` subcommand with its `scan` and `read` actions."""
+    """Add the `servos` subcommand with its `scan`, `set-id`, `read` and `calibrate` actions."""
     parser = subparsers.add_parser("servos", help="scan a servo bus or read the configured joints")
     commands = parser.add_subparsers(dest="servos_command", metavar="ACTION", required=True)
 
@@ -35,13 +44,30 @@ def register(subparsers: Any) -> None:
     scan_parser.add_argument(
         "--margin-ms",
         type=number(0, 1000, low_open=True, unit="ms"),  # as a bus's timeout_margin_ms
-        default=20.0,
-        help="reply time allowed beyond the wire time (default 20)",
+        default=SCAN_MARGIN_MS,
+        help=f"reply time allowed beyond the wire time (default {SCAN_MARGIN_MS:g})",
     )
     scan_parser.add_argument(
         "--json", action="store_true", help="print a JSON list of {id, model, position}"
     )
     scan_parser.set_defaults(run=run_scan)
+
+    set_id = commands.add_parser(
+        "set-id", help="give a HerkuleX servo a new id (a factory-new one answers at 253)"
+    )
+    set_id.add_argument("--port", required=True, type=path, help="serial device of the bus")
+    set_id.add_argument("--baud", type=whole(0, max(BAUD_RATES)), default=115200,
+                        choices=BAUD_RATES, metavar="BAUD",
+                        help="the servo's baud rate (default 115200, the factory's)")
+    set_id.add_argument("--id", dest="servo_id", type=whole(0, 253), default=FACTORY_ID,
+                        help=f"the servo's id now (default {FACTORY_ID}, a new servo's)")
+    set_id.add_argument("--new-id", required=True, type=whole(0, 253),
+                        help="the id it is to have (refused if a servo on the bus has it)")
+    set_id.add_argument(
+        "--margin-ms", type=number(0, 1000, low_open=True, unit="ms"), default=SCAN_MARGIN_MS,
+        help=f"reply time allowed beyond the wire time (default {SCAN_MARGIN_MS:g})",
+    )
+    set_id.set_defaults(run=run_set_id)
 
     read = commands.add_parser(
         "read", help="print every configured joint: degrees, temperature, voltage, error bits"
@@ -78,6 +104,18 @@ def run_scan(arguments: argparse.Namespace) -> int:
         for servo in found:
             print(f"id {servo['id']:3d}  {servo['model']:<12} position {servo['position']}")
     return 0 if found else 1
+
+
+def run_set_id(arguments: argparse.Namespace) -> int:
+    """Give one HerkuleX servo its id, then print the bus as scanned after its reboot."""
+    _quiet_logging("error")
+    done = asyncio.run(set_id(arguments.port, arguments.baud, arguments.servo_id,
+                              arguments.new_id, arguments.margin_ms / 1000))
+    print(f"id {done['id']} -> {done['new_id']}: EEP 6 written and read back "
+          f"({done['eep_id']}), servo rebooted; on the bus now:")
+    for servo in done["found"]:
+        print(f"id {servo['id']:3d}  {servo['model']:<12} position {servo['position']}")
+    return 0
 
 
 def run_read(arguments: argparse.Namespace) -> int:
