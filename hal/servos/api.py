@@ -93,6 +93,23 @@ class JointStatus:
         return self.fault is None and not self.flags and not self.problems
 
 
+@dataclass(frozen=True, slots=True)
+class BatteryReading:
+    """The battery as the servos last read it ([servos.battery]): volts, and its warning line.
+
+    `voltage_v` is None until the battery's servo has been read (or while it is silent).
+    """
+
+    joint: str  # whose servo reads it
+    voltage_v: float | None
+    warn_below_v: float
+
+    @property
+    def low(self) -> bool:
+        """Below its warning line (False while unread)."""
+        return self.voltage_v is not None and self.voltage_v < self.warn_below_v
+
+
 Pose = Mapping[str, float]  # joint name -> degrees
 
 # Who sent a goal, when nobody says: a move() of the game, a stream() step of the body.
@@ -245,6 +262,10 @@ class ServoApi(Protocol):
 
     def on_goals(self, listener: Callable[[Goal], None]) -> None:
         """Call `listener` with every goal written, by any path, once its packet is sent."""
+        ...
+
+    def battery(self) -> BatteryReading | None:
+        """The battery's last reading by the health poll; None when no battery is watched."""
         ...
 
     def off_goals(self, listener: Callable[[Goal], None]) -> None:

@@ -72,7 +72,7 @@ from kasparctl.game.storage import StorageFailed
 from kasparctl.log import configure_logging
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
 from kasparctl.service.sdnotify import Notifier, watchdog_interval
-from kasparctl.service.status import STATUS_WORDS, recovery_words, status_line
+from kasparctl.service.status import STATUS_WORDS, battery_words, recovery_words, status_line
 
 log = structlog.get_logger("kasparctl.service.daemon")
 
@@ -389,7 +389,8 @@ class Daemon:
     def _status(self, game: Game) -> str:
         """STATUS=: the stage, Kaspar confused (and what reopen would do), the problems."""
         confused = recovery_words(game.session_state, game.settings)
-        return status_line(game.stage, game.problems, self._notice, confused)
+        battery = battery_words(self.hw.servos.battery() if self.hw is not None else None)
+        return status_line(game.stage, game.problems, self._notice, confused, battery)
 
     def _on_game_event(self, event: GameEvent, info: dict[str, Any]) -> None:
         game = self.game
