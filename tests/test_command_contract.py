@@ -72,6 +72,7 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
         (["--port", "/dev/null", "--protocol", "herkulex", "--baud", "12"], "--baud"),
     ],
     "servos read": [([], "--config")],
+    "port-name": [([], "device"), (["ttyACM0", "--sysfs", ""], "--sysfs")],
     "servos set-id": [
         (["--port", "/dev/null"], "--new-id"),
         (["--port", "/dev/null", "--new-id", "254"], "--new-id"),
@@ -123,6 +124,7 @@ REQUIRED = {
     "servos scan": ["--port", "/dev/null", "--protocol", "maestro"],
     "servos read": ["--config", "k.toml"],
     "servos set-id": ["--port", "/dev/null", "--new-id", "3"],
+    "port-name": ["ttyACM0"],
     "servos calibrate": ["--config", "k.toml"],
     "pose record": ["happy"],
     "pose play": ["happy"],
@@ -242,6 +244,7 @@ def _failures(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "servos scan": (["--port", nowhere, "--protocol", "maestro"], nowhere),
         "servos read": (config, missing),
         "servos set-id": (["--port", nowhere, "--new-id", "3"], nowhere),
+        "port-name": (["ttyACM0", "--sysfs", nowhere], "ttyACM0 is not a Maestro"),
         "servos calibrate": (config, missing),
         "pose record": (["happy", *config], missing),
         "pose play": (["happy", *config], missing),
