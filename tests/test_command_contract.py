@@ -73,6 +73,7 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
     ],
     "servos read": [([], "--config")],
     "port-name": [([], "device"), (["ttyACM0", "--sysfs", ""], "--sysfs")],
+    "servos set-voltage": [([], "--config")],
     "servos set-id": [
         (["--port", "/dev/null"], "--new-id"),
         (["--port", "/dev/null", "--new-id", "254"], "--new-id"),
@@ -125,6 +126,7 @@ REQUIRED = {
     "servos read": ["--config", "k.toml"],
     "servos set-id": ["--port", "/dev/null", "--new-id", "3"],
     "port-name": ["ttyACM0"],
+    "servos set-voltage": ["--config", "k.toml"],
     "servos calibrate": ["--config", "k.toml"],
     "pose record": ["happy"],
     "pose play": ["happy"],
@@ -245,6 +247,7 @@ def _failures(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "servos read": (config, missing),
         "servos set-id": (["--port", nowhere, "--new-id", "3"], nowhere),
         "port-name": (["ttyACM0", "--sysfs", nowhere], "ttyACM0 is not a Maestro"),
+        "servos set-voltage": (config, missing),
         "servos calibrate": (config, missing),
         "pose record": (["happy", *config], missing),
         "pose play": (["happy", *config], missing),

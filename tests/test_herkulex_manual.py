@@ -241,3 +241,21 @@ def test_servos_read_without_the_limits_names_the_voltage_fault(tmp_path, capsys
     out = capsys.readouterr().out
     assert code == 1
     assert "voltage: voltage 13.0 V, the servo's limits 6.7-10.1 V" in out
+
+
+def test_set_voltage_writes_the_limits_to_eep_only_when_asked(tmp_path, capsys):
+    with HerkulexEmulator(tmp_path / "ttyHX", ids=[1, 2], supply_v=13.0) as emulator:
+        config = _battery_robot(tmp_path, emulator.path)
+        assert main(["servos", "read", "--config", config]) == 0
+        capsys.readouterr()
+        assert all(s.eep[hx.Eep.MIN_VOLTAGE:hx.Eep.MAX_VOLTAGE + 1] == bytes((0x5B, 0x89))
+                   for s in emulator.servos.values())  # read wrote RAM only
+        code = main(["servos", "set-voltage", "--config", config])
+        out = capsys.readouterr().out
+        assert code == 0, out
+        assert all(s.eep[hx.Eep.MIN_VOLTAGE:hx.Eep.MAX_VOLTAGE + 1] == bytes((135, 182))
+                   for s in emulator.servos.values())
+        emulator.servos[1].latched = 0
+        emulator.handle(hx.reboot(1))  # powered again: RAM copied from the new EEP
+        assert emulator.servos[1].latched == 0  # 13 V is inside the servo's own limits now
+    assert out.splitlines()[0] == ("torso_yaw            body   id   1  EEP 12-13: 9.99-13.47 V  ok")

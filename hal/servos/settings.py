@@ -124,7 +124,7 @@ class BusSettings(_Settings, frozen=True):
     retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
     # HerkuleX only: the supply limits written to every servo's RAM (6, 7) at start, so
     # that a battery above the factory limits (6.7-10.1 V) is not a voltage error. The
-    # servos' EEP is never written for them (only `kasparctl servos set-voltage --eep`).
+    # servos' EEP is never written for them (only by `kasparctl servos set-voltage`).
     min_voltage_v: Annotated[float, msgspec.Meta(ge=0, le=VOLTAGE_REGISTER_MAX_V,
                                                  extra={"unit": "V"})] | None = None
     max_voltage_v: Annotated[float, msgspec.Meta(ge=0, le=VOLTAGE_REGISTER_MAX_V,

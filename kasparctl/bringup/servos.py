@@ -14,7 +14,7 @@ from hal.errors import BusError
 from hal.servos import herkulex as hx
 from hal.servos.api import JointStatus, ServoLimits
 from hal.servos.bus import SerialBus
-from hal.servos.drivers import DRIVERS, BusDriver, HerkulexDriver
+from hal.servos.drivers import DRIVERS, BusDriver, HerkulexDriver, driver_for
 from hal.servos.joints import Joints
 from hal.servos.settings import JointSettings, model_named
 from hal.servos.sim import SimServos
@@ -138,6 +138,46 @@ async def set_id(
             f"in place of {servo_id}"
         )
     return {"id": servo_id, "new_id": new_id, "eep_id": written, "found": after}
+
+
+async def set_voltage_eep(config_path: str) -> list[dict[str, Any]]:
+    """Write each HerkuleX bus's min/max_voltage_v into its servos' EEP (12, 13), read back.
+
+    The engineer's explicit request: the daemon only ever writes RAM. With the limits
+    in EEP a servo powers up inside them (no voltage bit at power-up). One row per
+    configured joint of such a bus; BringUpError when the configuration has none.
+    """
+    config = load_config(config_path, poses=False)
+    settings = config.servos
+    if settings.backend != "real":
+        raise BringUpError(f"{config_path}: servos.backend is {settings.backend!r}; set-voltage "
+                           "writes the real servos' EEP")
+    buses = [bus for bus in settings.buses if bus.voltage_limits is not None]
+    if not buses:
+        raise BringUpError(f"{config_path}: no HerkuleX bus has min_voltage_v and max_voltage_v")
+    rows = []
+    for bus in buses:
+        limits = bus.voltage_limits
+        assert limits is not None
+        wanted = bytes(hx.raw_voltage(v) for v in limits)
+        driver = driver_for(bus)
+        assert isinstance(driver, HerkulexDriver)
+        await driver.start()
+        try:
+            if not driver.bus.connected:
+                raise BusError(driver.bus.unavailable())
+            for joint in (j for j in settings.joints if j.bus == bus.name):
+                await driver.write_voltage_limits([joint.id], *limits, eep=True)
+                found = await driver.read_eep(joint.id, hx.Eep.MIN_VOLTAGE, 2)
+                rows.append({
+                    "joint": joint.name, "bus": bus.name, "id": joint.id,
+                    "eep_min_voltage_v": round(hx.voltage_v(found[0]), 2),
+                    "eep_max_voltage_v": round(hx.voltage_v(found[1]), 2),
+                    "ok": found == wanted,
+                })
+        finally:
+            await driver.close()
+    return rows
 
 
 async def read_joints(config_path: str) -> list[dict[str, Any]]:

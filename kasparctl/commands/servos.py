@@ -19,6 +19,7 @@ from kasparctl.bringup.servos import (
     read_joints,
     scan,
     set_id,
+    set_voltage_eep,
 )
 from kasparctl.commands.arguments import number, path, whole, whole_ranges
 from kasparctl.log import configure_logging
@@ -69,6 +70,14 @@ def register(subparsers: Any) -> None:
     )
     set_id.set_defaults(run=run_set_id)
 
+    voltage = commands.add_parser(
+        "set-voltage",
+        help="write the HerkuleX buses' min/max_voltage_v into their servos' EEP (kept "
+        "across power; the service itself writes RAM only)",
+    )
+    voltage.add_argument("--config", required=True, type=path, help="kaspar.toml")
+    voltage.set_defaults(run=run_set_voltage)
+
     read = commands.add_parser(
         "read", help="print every configured joint: degrees, temperature, voltage, error bits"
     )
@@ -116,6 +125,17 @@ def run_set_id(arguments: argparse.Namespace) -> int:
     for servo in done["found"]:
         print(f"id {servo['id']:3d}  {servo['model']:<12} position {servo['position']}")
     return 0
+
+
+def run_set_voltage(arguments: argparse.Namespace) -> int:
+    """Write the voltage limits to EEP; print what each servo holds now; exit 1 on a mismatch."""
+    _quiet_logging()
+    rows = asyncio.run(set_voltage_eep(arguments.config))
+    for row in rows:
+        verdict = "ok" if row["ok"] else "NOT WRITTEN"
+        print(f"{row['joint']:<20} {row['bus']:<6} id {row['id']:3d}  EEP 12-13: "
+              f"{row['eep_min_voltage_v']:.2f}-{row['eep_max_voltage_v']:.2f} V  {verdict}")
+    return 0 if all(row["ok"] for row in rows) else 1
 
 
 def run_read(arguments: argparse.Namespace) -> int:
