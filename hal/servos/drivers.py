@@ -9,6 +9,7 @@ one SYNC_WRITE, S_JOG or multiple-target packet per control step.
 from __future__ import annotations
 
 import abc
+import contextlib
 import enum
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -28,6 +29,9 @@ from hal.servos.settings import BusSettings
 AX12_SPEED_DPS_PER_UNIT = 0.111 * 6  # moving speed unit: 0.111 rpm
 
 log = structlog.get_logger("hal.servos.drivers")
+
+# A scan's second look at the ids whose replies came late: this many times the margin.
+LATE_MARGIN_FACTOR = 5
 
 T = TypeVar("T")
 
@@ -434,10 +438,43 @@ class HerkulexDriver(BusDriver):
         return True
 
     async def answering(self, ids: Sequence[int]) -> list[int]:
-        """One STAT per id, all in one hand-off to the bus thread: a scan of 254 ids."""
-        exchanges = [
-            Exchange(hx.stat(i), 1, self.framing, self._ack(i, hx.Command.STAT), 9) for i in ids
-        ]
+        """One STAT per id, all in one hand-off to the bus thread: a scan of 254 ids.
+
+        A reply that comes after its deadline lands in the next id's exchange: that
+        servo, and the one whose exchange it spoiled, are asked once more with a
+        margin LATE_MARGIN_FACTOR times as long (a busy machine, a slow adapter).
+        """
+        heard: set[int] = set()  # ids whose reply came in another id's exchange
+        spoiled: set[int] = set()  # ids whose exchange got another id's reply
+        answered = await self._stats(ids, heard, spoiled)
+        again = sorted((heard | spoiled) - set(answered))
+        if again:
+            margin = self.bus.timeout_margin
+            self.bus.timeout_margin = margin * LATE_MARGIN_FACTOR
+            try:
+                answered += await self._stats(again, heard, spoiled)
+            finally:
+                self.bus.timeout_margin = margin
+        return sorted(answered)
+
+    async def _stats(self, ids: Sequence[int], heard: set[int], spoiled: set[int]) -> list[int]:
+        def decode_for(servo_id: int) -> Callable[[list[bytes]], hx.Ack]:
+            check = self._ack(servo_id, hx.Command.STAT)
+
+            def decode(packets: list[bytes]) -> hx.Ack:
+                try:
+                    return check(packets)
+                except hx.HerkulexError:
+                    with contextlib.suppress(CodecError):
+                        other = hx.decode_ack(packets[0]).servo_id
+                        if other != servo_id:
+                            heard.add(other)
+                            spoiled.add(servo_id)
+                    raise
+
+            return decode
+
+        exchanges = [Exchange(hx.stat(i), 1, self.framing, decode_for(i), 9) for i in ids]
         outcomes = await self.bus.exchange_all(exchanges)
         for outcome in outcomes:
             if isinstance(outcome, PortUnavailable):

@@ -14,7 +14,13 @@ from hal.errors import BusError
 from hal.servos import herkulex as hx
 from hal.servos.api import JointStatus, ServoLimits
 from hal.servos.bus import SerialBus
-from hal.servos.drivers import DRIVERS, BusDriver, HerkulexDriver, driver_for
+from hal.servos.drivers import (
+    DRIVERS,
+    LATE_MARGIN_FACTOR,
+    BusDriver,
+    HerkulexDriver,
+    driver_for,
+)
 from hal.servos.joints import Joints
 from hal.servos.settings import JointSettings, model_named
 from hal.servos.sim import SimServos
@@ -46,20 +52,28 @@ async def _open(port: str, protocol: str, baud: int, margin: float) -> BusDriver
 
 
 async def _found(driver: BusDriver, protocol: str, ids: list[int]) -> list[dict[str, Any]]:
-    """Who answers among `ids` (the protocol's shortest exchange), then each one's model."""
+    """Who answers among `ids` (the protocol's shortest exchange), then each one's model.
+
+    The few that answered are asked their model and position with a margin
+    LATE_MARGIN_FACTOR times the scan's: a servo that answered late must not be lost.
+    """
     answering = await driver.answering(ids)
+    margin = driver.bus.timeout_margin
+    driver.bus.timeout_margin = margin * LATE_MARGIN_FACTOR
     found = []
-    for servo_id in answering:
-        model_number = await driver.ping(servo_id)
-        if model_number is None:
-            continue  # answered once, then not: a flaky link, not a servo to name
-        position = (await driver.read_positions([servo_id]))[servo_id]
-        name = model_named(model_number, protocol) or (
-            "maestro" if protocol == "maestro" else f"model {model_number}"
-        )
-        found.append(
-            {"id": servo_id, "model": name, "model_number": model_number, "position": position}
-        )
+    try:
+        for servo_id in answering:
+            model_number = await driver.ping(servo_id)
+            if model_number is None:
+                continue  # answered once, then not: a flaky link, not a servo to name
+            position = (await driver.read_positions([servo_id]))[servo_id]
+            name = model_named(model_number, protocol) or (
+                "maestro" if protocol == "maestro" else f"model {model_number}"
+            )
+            found.append({"id": servo_id, "model": name, "model_number": model_number,
+                          "position": position})
+    finally:
+        driver.bus.timeout_margin = margin
     return found
 
 
