@@ -83,3 +83,6 @@ def test_status_shows_the_battery():
     assert battery_words(None) is None
     line = status_line("guessing", battery=battery_words(reading))
     assert line == "step 4: Kaspar guesses the names | battery LOW: 11.6 V, below 11.8 V"
+    # Last, after the problems and the notice: a line's beginning stays as it was.
+    line = status_line("idle", notice="session x abandoned", battery="battery 13.0 V")
+    assert line == "waiting: 'next' starts the session | session x abandoned | battery 13.0 V"

@@ -92,7 +92,7 @@ def test_set_id_names_the_bus_when_nothing_answers_at_the_id(tmp_path, capsys):
 def test_a_scan_asks_again_the_servos_whose_replies_came_late(tmp_path, capsys):
     # A busy machine or a slow adapter: every reply comes after the scan's 10 ms margin,
     # so it lands in the next id's exchange; those ids are asked again, more patiently.
-    with HerkulexEmulator(tmp_path / "ttyHX", ids=[2, 3, 7]) as emulator:
-        emulator.reply_delay = 0.02
-        code, found = _scan(emulator.path, capsys, "--ids", "0-12")
-    assert code == 0 and [servo["id"] for servo in found] == [2, 3, 7]
+    with HerkulexEmulator(tmp_path / "ttyHX", ids=[2, 3, 9]) as emulator:
+        emulator.reply_delay = 0.015
+        code, found = _scan(emulator.path, capsys, "--ids", "0-14")
+    assert code == 0 and [servo["id"] for servo in found] == [2, 3, 9]

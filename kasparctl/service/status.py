@@ -58,13 +58,11 @@ def status_line(
     battery: str | None = None,
 ) -> str:
     """The STATUS= text for `stage` with `problems` (part -> why), each reason cut to a limit,
-    and a `notice` (a session abandoned) last; `confused` (recovery_words) after the stage,
-    then `battery` (battery_words)."""
+    and a `notice` (a session abandoned); `confused` (recovery_words) after the stage, and
+    `battery` (battery_words) at the end."""
     words = STATUS_WORDS.get(stage, stage)
     if confused:
         words = f"{words} | {confused}"
-    if battery:
-        words = f"{words} | {battery}"
     parts = [
         f"{PROBLEM_WORDS[kind]}: {_cut(detail, DETAIL_LIMIT)}"
         + (STORAGE_ADVICE if kind is FaultSource.STORAGE else "")
@@ -72,7 +70,8 @@ def status_line(
     ]
     if notice:
         parts.append(_cut(notice, DETAIL_LIMIT))
-    return _cut(" | ".join([words, *parts]), STATUS_LIMIT)
+    line = _cut(" | ".join([words, *parts]), STATUS_LIMIT - len(battery or "") - 3)
+    return f"{line} | {battery}" if battery else line
 
 
 def battery_words(reading: BatteryReading | None) -> str | None:
