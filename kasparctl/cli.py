@@ -33,6 +33,7 @@ COMMAND_MODULES = (
     "reload",
     "install",
     "servos",
+    "port_name",
     "pose",
     "behaviour",
     "say",

@@ -9,10 +9,11 @@ from hal.servos.drivers import DRIVERS
 TEST_MARGIN = 0.1
 
 
-def make_driver(protocol: str, path, baud: int = 1_000_000, retries: int = 2):
+def make_driver(protocol: str, path, baud: int = 1_000_000, retries: int = 2, **options):
+    """A driver of `protocol` on `path`; `options` go to the driver (HerkuleX voltage_limits)."""
     bus = SerialBus(protocol, str(path), baud, timeout_margin=TEST_MARGIN, retries=retries,
                     backoff_initial=0.02, backoff_max=0.2)
-    return DRIVERS[protocol](bus)
+    return DRIVERS[protocol](bus, **options)
 
 
 class FakeClock:

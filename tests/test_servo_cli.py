@@ -120,7 +120,7 @@ def test_read_works_on_the_simulated_servos(tmp_path, capsys):
                     (tmp_path / "kaspar.toml").read_text().replace('"real"', '"sim"'))
     assert main(["servos", "read", "--config", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "left_elbow" in out and "torso_yaw" in out and out.count("0.0 deg   35 C  12.0 V  ok") == 2
+    assert "left_elbow" in out and "torso_yaw" in out and out.count("0.0 deg  35.0 C  13.2 V  ok") == 2  # the simulated battery, full
 
 
 def test_check_names_each_missing_servo(tmp_path, capsys, monkeypatch):

@@ -47,6 +47,24 @@ class Fault:
 
 
 @dataclass(frozen=True, slots=True)
+class ServoLimits:
+    """A servo's own temperature and supply limits, where its protocol keeps them.
+
+    HerkuleX keeps them twice: in EEP (11 Max Temperature, 12 Min Voltage, 13 Max
+    Voltage: copied to RAM at power-up) and in RAM (5, 6, 7: what it acts on now).
+    """
+
+    max_temperature_c: float | None  # None: a raw value beyond the manual's table
+    min_voltage_v: float
+    max_voltage_v: float
+
+    def __str__(self) -> str:
+        """"84 C, 6.7-10.1 V", as `servos read` prints it."""
+        hot = "?" if self.max_temperature_c is None else f"{self.max_temperature_c:.0f}"
+        return f"{hot} C, {self.min_voltage_v:.1f}-{self.max_voltage_v:.1f} V"
+
+
+@dataclass(frozen=True, slots=True)
 class JointStatus:
     """One joint as `kasparctl servos read` and the health poll see it.
 
@@ -66,11 +84,30 @@ class JointStatus:
     raw_position: int | None = None
     flags: tuple[str, ...] = ()
     problems: tuple[str, ...] = ()
+    stored_limits: ServoLimits | None = None  # the servo's own EEP limits, as read
+    active_limits: ServoLimits | None = None  # the limits it works to now (RAM)
 
     @property
     def healthy(self) -> bool:
         """No fault, no error bit, nothing impossible."""
         return self.fault is None and not self.flags and not self.problems
+
+
+@dataclass(frozen=True, slots=True)
+class BatteryReading:
+    """The battery as the servos last read it ([servos.battery]): volts, and its warning line.
+
+    `voltage_v` is None until the battery's servo has been read (or while it is silent).
+    """
+
+    joint: str  # whose servo reads it
+    voltage_v: float | None
+    warn_below_v: float
+
+    @property
+    def low(self) -> bool:
+        """Below its warning line (False while unread)."""
+        return self.voltage_v is not None and self.voltage_v < self.warn_below_v
 
 
 Pose = Mapping[str, float]  # joint name -> degrees
@@ -227,6 +264,10 @@ class ServoApi(Protocol):
         """Call `listener` with every goal written, by any path, once its packet is sent."""
         ...
 
+    def battery(self) -> BatteryReading | None:
+        """The battery's last reading by the health poll; None when no battery is watched."""
+        ...
+
     def off_goals(self, listener: Callable[[Goal], None]) -> None:
         """Stop calling a listener given to on_goals (unknown listeners are ignored)."""
         ...
@@ -238,8 +279,11 @@ class Health:
 
     `flags` names every error bit the servo reported, `cleared` those the driver
     wrote back to zero at once because they are about one packet or a limit, not
-    the servo's health (HerkuleX invalid packet, position limit). `temperature_limit_c`
-    is the servo's own cut-off where the protocol has one.
+    the servo's health (HerkuleX invalid packet, position limit, and the voltage bit a
+    servo latched at power-up under its factory limits when the voltage is inside the
+    configured ones). `temperature_limit_c` is the servo's own cut-off where the protocol
+    has one; `stored_limits` and `active_limits` its EEP and RAM limits (HerkuleX);
+    `detail` says what a fault is in words, where the bits alone do not.
     """
 
     position: int | None = None
@@ -250,6 +294,9 @@ class Health:
     kind: FaultKind | None = None
     cleared: tuple[str, ...] = ()
     temperature_limit_c: float | None = None
+    stored_limits: ServoLimits | None = None
+    active_limits: ServoLimits | None = None
+    detail: str = ""
 
 
 class ServoDriver(Protocol):

@@ -9,21 +9,29 @@ one SYNC_WRITE, S_JOG or multiple-target packet per control step.
 from __future__ import annotations
 
 import abc
+import contextlib
 import enum
 import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar
+
+import structlog
 
 from hal.errors import BusTimeout, CodecError, PortUnavailable, ServoSilent
 from hal.servos import dynamixel1 as dx1
 from hal.servos import dynamixel2 as dx2
 from hal.servos import herkulex as hx
 from hal.servos import maestro as mo
-from hal.servos.api import FaultKind, Health
+from hal.servos.api import FaultKind, Health, ServoLimits
 from hal.servos.bus import Exchange, Framing, SerialBus
 from hal.servos.settings import BusSettings
 
 AX12_SPEED_DPS_PER_UNIT = 0.111 * 6  # moving speed unit: 0.111 rpm
+
+log = structlog.get_logger("hal.servos.drivers")
+
+# A scan's second look at the ids whose replies came late: this many times the margin.
+LATE_MARGIN_FACTOR = 5
 
 T = TypeVar("T")
 
@@ -41,6 +49,7 @@ class BusDriver(abc.ABC):
     """
 
     framing: Framing  # how the protocol's replies are cut out of the byte stream
+    id_range: tuple[int, int]  # the ids (channels) a servo can have, as the codec states them
 
     def __init__(self, bus: SerialBus) -> None:
         """Drive the servos on `bus`; the bus is started and closed with the driver."""
@@ -78,6 +87,14 @@ class BusDriver(abc.ABC):
     async def ping(self, servo_id: int) -> int | None:
         """The model number of a servo that answers (0 if the protocol has none); None if silent."""
 
+    async def answers(self, servo_id: int) -> bool:
+        """Whether a servo answers at all, in the protocol's shortest exchange (a scan's)."""
+        return await self.ping(servo_id) is not None
+
+    async def answering(self, ids: Sequence[int]) -> list[int]:
+        """Those of `ids` that answer, asked one after another (a scan)."""
+        return [servo_id for servo_id in ids if await self.answers(servo_id)]
+
     @abc.abstractmethod
     async def read_positions(self, ids: Sequence[int]) -> dict[int, int]:
         """Present raw positions; ServoSilent names the first servo that did not answer."""
@@ -113,6 +130,7 @@ class Dynamixel1Driver(BusDriver):
     """AX-12A servos on Dynamixel Protocol 1.0."""
 
     framing = Framing(dx1.HEAD_SIZE, dx1.packet_length)
+    id_range = dx1.ID_RANGE
 
     def _status(self, servo_id: int, length: int) -> Callable[[list[bytes]], dx1.Status]:
         def decode(packets: list[bytes]) -> dx1.Status:
@@ -203,6 +221,7 @@ class Dynamixel2Driver(BusDriver):
     """X series servos (XL430) on Dynamixel Protocol 2.0."""
 
     framing = Framing(dx2.HEAD_SIZE, dx2.packet_length)
+    id_range = dx2.ID_RANGE
 
     def _status(self, servo_id: int, length: int) -> Callable[[list[bytes]], dx2.Status]:
         def decode(packets: list[bytes]) -> dx2.Status:
@@ -302,28 +321,55 @@ def _ack_policy_packet() -> bytes:
     return hx.ram_write(hx.BROADCAST_ID, hx.Ram.ACK_POLICY, bytes((hx.AckPolicy.READS_ONLY,)))
 
 
+def _greeting(voltage_limits: tuple[float, float] | None) -> bytes:
+    """What every servo is told each time the port opens: its ACK policy, its supply limits."""
+    greeting = _ack_policy_packet()
+    if voltage_limits is not None:
+        greeting += hx.voltage_limits_write(hx.BROADCAST_ID, *voltage_limits)
+    return greeting
+
+
+def _limits(raw: bytes) -> ServoLimits:
+    """Max Temperature, Min Voltage, Max Voltage (EEP 11-13 or RAM 5-7) in degrees and volts."""
+    try:
+        hot: float | None = hx.temperature_c(raw[0])
+    except hx.HerkulexError:
+        hot = None
+    return ServoLimits(hot, hx.voltage_v(raw[1]), hx.voltage_v(raw[2]))
+
+
 class HerkulexDriver(BusDriver):
     """HerkuleX DRS-0101/0201 servos, whatever ACK policy a previous program left them at.
 
     At start, and again after the adapter reconnects or a servo stops answering
     a read, every servo is told to answer reads only (RAM 1, ACK policy 1) by one
-    broadcast write, which no servo answers whatever its policy. Pings are STAT,
-    which every policy answers. Positions keep their 10 position bits: real
-    servos set flags in the high byte. Error bits that are about a packet or a
-    position limit are written back to zero at once (reported as `cleared`);
-    fault bits stay latched until reset_errors().
+    broadcast write, which no servo answers whatever its policy; with
+    `voltage_limits` (the bus's min_voltage_v, max_voltage_v) the same broadcast
+    sets every servo's RAM Min/Max Voltage, so that a battery above the factory
+    limits is no error (EEP is not written). Pings are STAT, which every policy
+    answers. Positions keep their 10 position bits: real servos set flags in the
+    high byte. Error bits that are about a packet or a position limit are written
+    back to zero at once (reported as `cleared`); so is the voltage bit, once per
+    servo and only while the voltage is inside the configured limits, because a
+    servo latches it at power-up under its factory limits. Any other voltage bit is
+    a fault, and every fault bit stays latched until reset_errors().
     """
 
     framing = Framing(hx.HEAD_SIZE, hx.packet_length)
+    id_range = hx.ID_RANGE
 
-    def __init__(self, bus: SerialBus) -> None:
+    def __init__(self, bus: SerialBus, voltage_limits: tuple[float, float] | None = None) -> None:
         """Drive the HerkuleX servos on `bus`; nothing is sent before start()."""
         super().__init__(bus)
-        self._temperature_limits: dict[int, float] = {}
+        self.voltage_limits = voltage_limits
+        self._stored: dict[int, ServoLimits] = {}  # EEP 11-13, read once per servo
+        # Servos whose voltage bit has been judged since their RAM limits were set: only the
+        # first reading after that may carry the bit latched at power-up.
+        self._judged: set[int] = set()
         # Sent by the bus's owner thread each time the port opens, before anything else:
         # a reconnect may follow a power cycle, after which each servo has its EEP policy
-        # back, and a read must not go first.
-        bus.greeting = _ack_policy_packet()
+        # and limits back, and a read must not go first.
+        bus.greeting = _greeting(voltage_limits)
 
     async def _send_ack_policy(self) -> None:
         await self.bus.transact(_ack_policy_packet())
@@ -383,14 +429,65 @@ class HerkulexDriver(BusDriver):
                 outcomes[k] = outcome
         return outcomes
 
+    async def answers(self, servo_id: int) -> bool:
+        """STAT only: answered at every ACK policy, the shortest exchange (a scan's)."""
+        try:
+            await self._ask(servo_id, hx.stat(servo_id), self._ack(servo_id, hx.Command.STAT), 9)
+        except ServoSilent:
+            return False
+        return True
+
+    async def answering(self, ids: Sequence[int]) -> list[int]:
+        """One STAT per id, all in one hand-off to the bus thread: a scan of 254 ids.
+
+        A reply that comes after its deadline lands in the next id's exchange: that
+        servo, and the one whose exchange it spoiled, are asked once more with a
+        margin LATE_MARGIN_FACTOR times as long (a busy machine, a slow adapter).
+        """
+        heard: set[int] = set()  # ids whose reply came in another id's exchange
+        spoiled: set[int] = set()  # ids whose exchange got another id's reply
+        answered = await self._stats(ids, heard, spoiled)
+        again = sorted((heard | spoiled) - set(answered))
+        if again:
+            margin = self.bus.timeout_margin
+            self.bus.timeout_margin = margin * LATE_MARGIN_FACTOR
+            try:
+                answered += await self._stats(again, heard, spoiled)
+            finally:
+                self.bus.timeout_margin = margin
+        return sorted(answered)
+
+    async def _stats(self, ids: Sequence[int], heard: set[int], spoiled: set[int]) -> list[int]:
+        def decode_for(servo_id: int) -> Callable[[list[bytes]], hx.Ack]:
+            check = self._ack(servo_id, hx.Command.STAT)
+
+            def decode(packets: list[bytes]) -> hx.Ack:
+                try:
+                    return check(packets)
+                except hx.HerkulexError:
+                    with contextlib.suppress(CodecError):
+                        other = hx.decode_ack(packets[0]).servo_id
+                        if other != servo_id:
+                            heard.add(other)
+                            spoiled.add(servo_id)
+                    raise
+
+            return decode
+
+        exchanges = [Exchange(hx.stat(i), 1, self.framing, decode_for(i), 9) for i in ids]
+        outcomes = await self.bus.exchange_all(exchanges)
+        for outcome in outcomes:
+            if isinstance(outcome, PortUnavailable):
+                raise outcome
+        return [i for i, outcome in zip(ids, outcomes, strict=True)
+                if not isinstance(outcome, Exception)]
+
     async def ping(self, servo_id: int) -> int | None:
         """STAT (answered at every ACK policy), then the model number; None when silent.
 
         0 for a servo that answers STAT but not the model read.
         """
-        try:
-            await self._ask(servo_id, hx.stat(servo_id), self._ack(servo_id, hx.Command.STAT), 9)
-        except ServoSilent:
+        if not await self.answers(servo_id):
             return None
         try:
             reply = await self._read(servo_id, hx.Eep.MODEL_NO_1, 2, eep=True)
@@ -426,64 +523,169 @@ class HerkulexDriver(BusDriver):
         await self.bus.transact(request)
 
     async def reset_errors(self, ids: Sequence[int]) -> None:
-        """RAM_WRITE of zero to STATUS_ERROR and STATUS_DETAIL: a HerkuleX latches them."""
-        zero = bytes((0, 0))
-        await self.bus.transact(b"".join(hx.ram_write(i, hx.Ram.STATUS_ERROR, zero) for i in ids))
+        """RAM_WRITE of zero to STATUS_ERROR and STATUS_DETAIL (a HerkuleX latches them).
+
+        Never blindly: a servo whose voltage bit is set while its voltage is still
+        outside its limits keeps its bits (logged); the next poll names the fault again.
+        """
+        for servo_id in ids:
+            reply = await self._read(servo_id, hx.Ram.STATUS_ERROR, hx.Ram.VOLTAGE + 1 -
+                                     hx.Ram.STATUS_ERROR)
+            volts = hx.voltage_v(reply.read_value()[1][-1])
+            if reply.status_error & hx.StatusError.EXCEED_INPUT_VOLTAGE:
+                limits = await self._active_limits(servo_id)
+                if not limits.min_voltage_v <= volts <= limits.max_voltage_v:
+                    log.warning("servo voltage still outside its limits: errors kept",
+                                bus=self.bus.name, servo=servo_id, voltage_v=round(volts, 2),
+                                limits=str(limits))
+                    continue
+            await self._write_zero(servo_id)
+
+    async def _write_zero(self, servo_id: int) -> None:
+        await self.bus.transact(hx.ram_write(servo_id, hx.Ram.STATUS_ERROR, bytes((0, 0))))
 
     async def read_health(self, servo_id: int) -> Health:
-        """One RAM_READ from the status error to the position; transient bits cleared at once.
+        """One RAM_READ from the status error to the position, and the servo's limits.
 
-        Temperature is converted with hx.TEMPERATURE_TABLE; the servo's own
-        temperature limit (RAM 5) is read once per servo.
+        Temperature is converted with the manual's table (a raw 0xFF is no servo's:
+        an impossible reading, named). The servo's EEP limits (11-13) are read once,
+        its RAM limits (5-7) each time: a servo whose RAM limits are not the bus's
+        (it was power-cycled behind a live adapter) has them written again.
         """
         first = hx.Ram.STATUS_ERROR
         length = hx.Ram.CALIBRATED_POSITION + 2 - first
         reply = await self._read(servo_id, first, length)
         registers = reply.read_value()[1]
         error = reply.status_error
+        stored = await self._stored_limits(servo_id)
+        active = await self._active_limits(servo_id)
         flags = _flags(error, hx.StatusError)
         if error & hx.StatusError.INVALID_PACKET:
             why = reply.status_detail & ~(
                 hx.StatusDetail.MOVING | hx.StatusDetail.INPOSITION | hx.StatusDetail.MOTOR_ON
             )
             flags += _flags(why, hx.StatusDetail)
+        volts = hx.voltage_v(registers[hx.Ram.VOLTAGE - first])
+        clearable = error & hx.TRANSIENT_ERRORS
+        detail = ""
+        if error & hx.StatusError.EXCEED_INPUT_VOLTAGE:
+            if self._latched_at_power_up(servo_id, volts):
+                # Expected on every servo of a battery above the factory limits: cleared and
+                # logged here, not reported as an error bit of the servo's health.
+                clearable |= hx.StatusError.EXCEED_INPUT_VOLTAGE
+                flags = tuple(f for f in flags if f != "EXCEED_INPUT_VOLTAGE")
+                log.info("power-up voltage error bit cleared", bus=self.bus.name,
+                         servo=servo_id, voltage_v=round(volts, 2), limits=str(active))
+            else:
+                detail = self._voltage_fault(volts, active)
+        self._judged.add(servo_id)
         cleared: tuple[str, ...] = ()
-        if error and not error & ~hx.TRANSIENT_ERRORS:
-            # Only packet and limit bits: safe to clear (torque policy 0x35 does not act on them).
-            await self.reset_errors([servo_id])
+        if error and not error & ~clearable:
+            # Only packet, limit and power-up voltage bits: safe to clear (the torque
+            # policy acts on the voltage bit, so a stale one would keep the torque off).
+            await self._write_zero(servo_id)
             cleared = _flags(error, hx.StatusError)
         kind = None
-        if error & hx.StatusError.EXCEED_TEMPERATURE:
+        faulty = error & ~clearable
+        if faulty & hx.StatusError.EXCEED_TEMPERATURE:
             kind = FaultKind.OVERHEATING
-        elif error & hx.StatusError.OVERLOAD:
+        elif faulty & hx.StatusError.OVERLOAD:
             kind = FaultKind.OVERLOAD
-        elif error & hx.StatusError.EXCEED_INPUT_VOLTAGE:
+        elif faulty & hx.StatusError.EXCEED_INPUT_VOLTAGE:
             kind = FaultKind.VOLTAGE
-        elif error & (hx.StatusError.DRIVER_FAULT | hx.StatusError.EEP_DISTORTED):
+        elif faulty & (hx.StatusError.DRIVER_FAULT | hx.StatusError.EEP_DISTORTED):
             kind = FaultKind.HARDWARE
+        raw_temperature = registers[hx.Ram.TEMPERATURE - first]
+        temperature: float | None
+        try:
+            temperature = hx.temperature_c(raw_temperature)
+        except hx.HerkulexError as impossible:
+            temperature = None
+            flags += (f"TEMPERATURE_READING_{raw_temperature:#04X}",)
+            kind = kind or FaultKind.IMPOSSIBLE
+            detail = detail or f"servo {servo_id}: {impossible}"
         return Health(
             position=hx.position(registers[-2:]),
-            temperature_c=hx.temperature_c(registers[hx.Ram.TEMPERATURE - first]),
-            voltage_v=hx.voltage_v(registers[hx.Ram.VOLTAGE - first]),
+            temperature_c=temperature,
+            voltage_v=volts,
             flags=flags,
             kind=kind,
             cleared=cleared,
-            temperature_limit_c=await self._temperature_limit(servo_id),
+            temperature_limit_c=active.max_temperature_c,
+            stored_limits=stored,
+            active_limits=active,
+            detail=detail if kind is not None else "",
         )
 
-    async def _temperature_limit(self, servo_id: int) -> float:
-        limit = self._temperature_limits.get(servo_id)
-        if limit is None:
-            reply = await self._read(servo_id, hx.Ram.MAX_TEMPERATURE, 1)
-            limit = hx.temperature_c(reply.read_value()[1][0])
-            self._temperature_limits[servo_id] = limit
-        return limit
+    def _latched_at_power_up(self, servo_id: int, volts: float) -> bool:
+        """A voltage bit from before the bus's limits were set, the voltage now inside them."""
+        if self.voltage_limits is None or servo_id in self._judged:
+            return False
+        low, high = self.voltage_limits
+        return low <= volts <= high
+
+    def _voltage_fault(self, volts: float, active: ServoLimits) -> str:
+        why = (
+            f"voltage {volts:.1f} V, the servo's limits {active.min_voltage_v:.1f}-"
+            f"{active.max_voltage_v:.1f} V"
+        )
+        if self.voltage_limits is None:
+            why += (f" (bus {self.bus.name} sets none: min_voltage_v and max_voltage_v put "
+                    "the battery's range in the servos' RAM)")
+        return why
+
+    async def _stored_limits(self, servo_id: int) -> ServoLimits:
+        limits = self._stored.get(servo_id)
+        if limits is None:
+            reply = await self._read(servo_id, hx.Eep.MAX_TEMPERATURE, 3, eep=True)
+            limits = self._stored[servo_id] = _limits(reply.read_value()[1])
+        return limits
+
+    async def _active_limits(self, servo_id: int) -> ServoLimits:
+        reply = await self._read(servo_id, hx.Ram.MAX_TEMPERATURE, 3)
+        raw = reply.read_value()[1]
+        if self.voltage_limits is not None:
+            wanted = tuple(hx.raw_voltage(v) for v in self.voltage_limits)
+            if tuple(raw[1:3]) != wanted:
+                # The servo has its EEP limits back: power-cycled behind a live adapter.
+                log.info("servo voltage limits set again", bus=self.bus.name, servo=servo_id,
+                         found=str(_limits(raw)))
+                await self.bus.transact(hx.voltage_limits_write(servo_id, *self.voltage_limits))
+                self._judged.discard(servo_id)
+                raw = bytes((raw[0], *wanted))
+        return _limits(raw)
+
+    # --- bring-up only: what the engineer asks for on purpose -------------------------------
+
+    async def write_voltage_limits(
+        self, ids: Sequence[int], low_v: float, high_v: float, eep: bool
+    ) -> None:
+        """Min/Max Voltage of each servo: RAM always, EEP too with `eep` (kept across power)."""
+        for servo_id in ids:
+            await self.bus.transact(hx.voltage_limits_write(servo_id, low_v, high_v))
+            if eep:
+                await self.bus.transact(hx.voltage_limits_write(servo_id, low_v, high_v, eep=True))
+
+    async def read_eep(self, servo_id: int, address: int, length: int) -> bytes:
+        """`length` bytes of EEP from `address`; ServoSilent when the servo does not answer."""
+        return (await self._read(servo_id, address, length, eep=True)).read_value()[1]
+
+    async def write_id(self, servo_id: int, new_id: int) -> None:
+        """EEP_WRITE of the id (EEP 6): the servo takes it at its next reboot."""
+        await self.bus.transact(hx.eep_write(servo_id, hx.Eep.ID, bytes((new_id,))))
+
+    async def reboot(self, servo_id: int) -> None:
+        """REBOOT (no reply): the servo restarts from its EEP."""
+        await self.bus.transact(hx.reboot(servo_id))
+        self._stored.pop(servo_id, None)
+        self._judged.discard(servo_id)
 
 
 class MaestroDriver(BusDriver):
     """Hobby servos on a Pololu Maestro's channels (compact protocol); ids are channels."""
 
     framing = Framing(2, lambda head: 2)
+    id_range = mo.ID_RANGE
 
     async def ping(self, servo_id: int) -> int | None:
         """Get Errors; 0 (a Maestro has no model number), or None when unanswered."""
@@ -565,4 +767,6 @@ def driver_for(settings: BusSettings) -> BusDriver:
         timeout_margin=settings.timeout_margin_ms / 1000,
         retries=settings.retries,
     )
+    if settings.protocol == "herkulex":
+        return HerkulexDriver(bus, voltage_limits=settings.voltage_limits)
     return DRIVERS[settings.protocol](bus)

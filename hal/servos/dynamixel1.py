@@ -15,6 +15,7 @@ from hal.errors import CodecError
 HEADER = b"\xff\xff"
 BROADCAST_ID = 0xFE
 MAX_ID = 0xFD
+ID_RANGE = (0, MAX_ID)  # the ids a servo can have (BROADCAST_ID is no servo's)
 HEAD_SIZE = 4  # FF FF ID LEN: enough to know the whole packet's length
 
 

@@ -18,6 +18,7 @@ from hal.servos.dynamixel1 import DynamixelError as DynamixelError
 HEADER = b"\xff\xff\xfd\x00"
 BROADCAST_ID = 0xFE
 MAX_ID = 0xFC  # 0xFD is reserved so that it cannot complete a header
+ID_RANGE = (0, MAX_ID)  # the ids a servo can have
 HEAD_SIZE = 7  # FF FF FD 00 ID LEN_L LEN_H
 STATUS = 0x55
 

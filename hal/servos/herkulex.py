@@ -12,13 +12,13 @@ What real servos send beyond the packet layout, and how it is read here:
 - the model is EEP 0 (Model No1: 0x01 DRS-0101, 0x02 DRS-0201) and EEP 1
   (Model No2: 0x01); read as one little-endian register like every other;
 - voltage is 0.074 V per unit (manual: 0x5B = 6.714 V, 0x89 = 10 V);
-- temperature is a raw ADC value: see TEMPERATURE_TABLE.
+- temperature is a raw ADC value: see TEMPERATURE_CENTI_C.
 """
 
 from __future__ import annotations
 
+import bisect
 import enum
-import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -27,6 +27,8 @@ from hal.errors import CodecError
 HEADER = b"\xff\xff"
 BROADCAST_ID = 0xFE
 MAX_ID = 0xFD
+ID_RANGE = (0, MAX_ID)  # the ids a servo can have; a new one answers at FACTORY_ID
+FACTORY_ID = 0xFD  # manual: every servo leaves the factory as 253
 HEAD_SIZE = 3  # FF FF SIZE
 MIN_SIZE = 7
 MAX_SIZE = 223
@@ -41,14 +43,39 @@ MODEL_DRS_0201 = 0x0102
 # EEP registers a servo answers (manual, non-volatile register map: addresses 0 to 53).
 EEP_SIZE = 54
 
-# Raw temperature (RAM 55, RAM 5) against degrees Celsius, interpolated linearly.
-# The manual's register map gives one point, the default Max Temperature 0xDF = 85 C.
-# PROVISIONAL: the manual's conversion table (its Reference section) could not be
-# consulted when this was written; the slope between the two ends below, 0.5 C per
-# unit, is an assumption to replace with that table before max_temperature_c is
-# trusted (docs/servos.md). The servo's own cut-off (RAM 5, in the same raw units)
-# does not depend on it.
-TEMPERATURE_TABLE: tuple[tuple[int, float], ...] = ((0x00, -26.5), (0xDF, 85.0), (0xFF, 101.0))
+# Raw temperature (RAM 55, and RAM 5 / EEP 11, the servo's own limit) to 1/100 degC: the
+# manual's thermistor table, one entry per raw value 0x00-0xFE (0xFF is not in it: no
+# servo reads it). As printed in sweetie-bot-project/sweetie_bot_herkulex
+# (herkulex_servo_drs101.cpp) and, up to 0xD2, robotActionController's herkulex.py
+# (T_ADC). The first prints 0xCD (205) as 68.61, out of sequence between 65.78 and
+# 67.46; the second prints 66.61, which is in sequence: 66.61 is used. Points the issue
+# checks: 0x42 = 0.05, 0x80 = 25.2, 0xA0 = 39.13, 0xC8 = 62.63, 0xDE = 84.11,
+# 0xDF = 85.42, 0xF0 = 119.49 (tests/test_herkulex.py).
+TEMPERATURE_CENTI_C: tuple[int, ...] = (
+    -7947, -7178, -6320, -5781, -5380, -5058, -4786, -4549, -4340, -4151, -3979, -3820,  # 0x00-0x0B
+    -3673, -3535, -3406, -3283, -3167, -3057, -2951, -2850, -2753, -2659, -2569, -2482,  # 0x0C-0x17
+    -2397, -2315, -2236, -2159, -2083, -2010, -1938, -1868, -1800, -1733, -1667, -1603,  # 0x18-0x23
+    -1539, -1477, -1417, -1357, -1298, -1240, -1183, -1126, -1071, -1016, -962, -909,  # 0x24-0x2F
+    -856, -804, -753, -702, -652, -602, -553, -504, -456, -408, -361, -314,  # 0x30-0x3B
+    -267, -221, -175, -129, -84, -39, 5, 49, 93, 137, 181, 224,  # 0x3C-0x47
+    267, 310, 352, 394, 437, 478, 520, 562, 603, 644, 686, 727,  # 0x48-0x53
+    767, 808, 849, 889, 929, 970, 1010, 1050, 1090, 1130, 1170, 1209,  # 0x54-0x5F
+    1249, 1289, 1328, 1368, 1407, 1447, 1486, 1526, 1565, 1605, 1644, 1684,  # 0x60-0x6B
+    1723, 1762, 1802, 1841, 1881, 1920, 1960, 1999, 2039, 2079, 2119, 2158,  # 0x6C-0x77
+    2198, 2238, 2278, 2318, 2359, 2399, 2439, 2480, 2520, 2561, 2602, 2643,  # 0x78-0x83
+    2684, 2725, 2766, 2808, 2850, 2891, 2933, 2976, 3018, 3060, 3103, 3146,  # 0x84-0x8F
+    3189, 3232, 3276, 3320, 3364, 3408, 3453, 3497, 3542, 3588, 3633, 3679,  # 0x90-0x9B
+    3725, 3772, 3818, 3866, 3913, 3961, 4009, 4057, 4106, 4156, 4205, 4256,  # 0x9C-0xA7
+    4306, 4357, 4409, 4461, 4513, 4566, 4619, 4673, 4728, 4783, 4839, 4895,  # 0xA8-0xB3
+    4952, 5009, 5068, 5127, 5186, 5247, 5308, 5370, 5433, 5496, 5561, 5626,  # 0xB4-0xBF
+    5693, 5760, 5828, 5898, 5968, 6040, 6113, 6187, 6263, 6339, 6417, 6497,  # 0xC0-0xCB
+    6578, 6661, 6746, 6832, 6920, 7010, 7102, 7196, 7292, 7391, 7492, 7596,  # 0xCC-0xD7
+    7703, 7812, 7925, 8041, 8160, 8284, 8411, 8542, 8679, 8820, 8966, 9118,  # 0xD8-0xE3
+    9276, 9441, 9613, 9793, 9982, 10181, 10390, 10611, 10845, 11093, 11359, 11643,  # 0xE4-0xEF
+    11949, 12280, 12641, 13036, 13472, 13959, 14509, 15139, 15873, 16750, 17829, 19218,  # 0xF0-0xFB
+    21132, 24101, 30091,  # 0xFC-0xFE
+)
+LAST_TEMPERATURE_RAW = 0xFE
 
 
 class HerkulexError(CodecError):
@@ -263,7 +290,10 @@ def eep_read(servo_id: int, address: int, length: int) -> bytes:
 
 
 def eep_write(servo_id: int, address: int, data: bytes) -> bytes:
-    """EEP_WRITE `data` at `address` of the non-volatile registers: never sent by the HAL."""
+    """EEP_WRITE `data` at `address` of the non-volatile registers.
+
+    Sent only by bring-up commands the engineer runs on purpose (set-id, set-voltage --eep).
+    """
     return _write(Command.EEP_WRITE, servo_id, address, data)
 
 
@@ -389,29 +419,49 @@ def model_number(value: bytes) -> int:
 
 
 def voltage_v(raw: int) -> float:
-    """Volts of a voltage register (RAM 54, 6, 7): 0.074 V per unit."""
+    """Volts of a voltage register (RAM 54, 6, 7; EEP 12, 13): 0.074 V per unit."""
     return raw * VOLTS_PER_UNIT
 
 
-def temperature_c(raw: int) -> float:
-    """Degrees Celsius of a raw temperature (RAM 55 or 5), from TEMPERATURE_TABLE.
+def raw_voltage(volts: float) -> int:
+    """The voltage register's count nearest `volts`; HerkulexError beyond what a byte holds."""
+    raw = round(volts / VOLTS_PER_UNIT)
+    if not 0 <= raw <= 0xFF:
+        raise HerkulexError(
+            f"{volts} V does not fit a voltage register (0 to {0xFF * VOLTS_PER_UNIT:.2f} V)"
+        )
+    return raw
 
-    HerkulexError for a raw value outside the table (a byte the servo cannot send).
+
+def voltage_limits_write(servo_id: int, low_v: float, high_v: float, eep: bool = False) -> bytes:
+    """Min and Max Voltage (RAM 6-7, or EEP 12-13) in one write."""
+    data = bytes((raw_voltage(low_v), raw_voltage(high_v)))
+    if eep:
+        return eep_write(servo_id, Eep.MIN_VOLTAGE, data)
+    return ram_write(servo_id, Ram.MIN_VOLTAGE, data)
+
+
+def temperature_c(raw: int) -> float:
+    """Degrees Celsius of a raw temperature (RAM 55, RAM 5 or EEP 11), from the manual's table.
+
+    HerkulexError for 0xFF (beyond the table: no servo reads it) or any value not a byte.
     """
-    return _interpolate(raw, TEMPERATURE_TABLE, "raw temperature")
+    if not 0 <= raw <= LAST_TEMPERATURE_RAW:
+        raise HerkulexError(
+            f"raw temperature {raw:#04x} is not a reading: the manual's table covers "
+            f"0x00 to {LAST_TEMPERATURE_RAW:#04x}"
+        )
+    return TEMPERATURE_CENTI_C[raw] / 100
 
 
 def raw_temperature(celsius: float) -> int:
-    """The raw reading nearest to `celsius` (for emulators and thresholds), clamped to the table."""
-    inverse = tuple((c, float(r)) for r, c in TEMPERATURE_TABLE)
-    low, high = inverse[0][0], inverse[-1][0]
-    return round(_interpolate(min(high, max(low, celsius)), inverse, "temperature"))
-
-
-def _interpolate(x: float, table: Sequence[tuple[float, float]], what: str) -> float:
-    if not table[0][0] <= x <= table[-1][0]:
-        raise HerkulexError(f"{what} {x} outside {table[0][0]}..{table[-1][0]}")
-    for (x0, y0), (x1, y1) in itertools.pairwise(table):
-        if x0 <= x <= x1:
-            return y0 + (y1 - y0) * (x - x0) / (x1 - x0)
-    raise HerkulexError(f"{what} {x} not covered")  # pragma: no cover - the bounds hold it
+    """The raw reading nearest to `celsius` (for emulators and thresholds), within the table."""
+    centi = celsius * 100
+    above = bisect.bisect_left(TEMPERATURE_CENTI_C, centi)
+    if above == 0:
+        return 0
+    if above > LAST_TEMPERATURE_RAW:
+        return LAST_TEMPERATURE_RAW
+    below = above - 1
+    nearer_below = centi - TEMPERATURE_CENTI_C[below] <= TEMPERATURE_CENTI_C[above] - centi
+    return below if nearer_below else above

@@ -50,6 +50,7 @@ from hal.errors import (
 from hal.servos.api import (
     MOVE,
     STREAM,
+    BatteryReading,
     Fault,
     FaultKind,
     Goal,
@@ -159,6 +160,7 @@ class Joints:
         self._last_status: dict[str, JointStatus] = {}
         self._retried_seen: dict[str, int] = {}  # bus name -> replies retried, as last logged
         self._bits: dict[tuple[str, str], int] = {}  # (joint, error bit) -> polls seen in a row
+        self._battery_v: float | None = None  # the battery joint's last voltage reading
         self.step = 1.0 / settings.control_hz
         # Each coupled joint's own value, as last asked (ServoSettings.realise adds its
         # leader's share): a lid keeps it while its eye moves.
@@ -206,6 +208,13 @@ class Joints:
         """Stop calling a listener given to on_goals; an unknown one is ignored."""
         with contextlib.suppress(ValueError):
             self._goal_listeners.remove(listener)
+
+    def battery(self) -> BatteryReading | None:
+        """The battery as the health poll last read it; None when no battery is watched."""
+        battery = self.settings.battery
+        if battery is None:
+            return None
+        return BatteryReading(battery.joint, self._battery_v, battery.warn_below_v)
 
     def claimed(self) -> frozenset[str]:
         """The joints a move, set_compliant or rest holds now (stream steps leave them be)."""
@@ -560,7 +569,8 @@ class Joints:
                 statuses.append(JointStatus(joint.name, None, bool(joint.torque), fault=fault))
                 continue
             if health.kind is not None and fault is None:
-                fault = Fault(joint.name, health.kind, ", ".join(health.flags), self.clock.now())
+                detail = health.detail or ", ".join(health.flags)
+                fault = Fault(joint.name, health.kind, detail, self.clock.now())
             position, problems = self._judge(joint, raw, health)
             statuses.append(
                 JointStatus(
@@ -574,6 +584,8 @@ class Joints:
                     raw_position=raw,
                     flags=health.flags,
                     problems=tuple(problems),
+                    stored_limits=health.stored_limits,
+                    active_limits=health.active_limits,
                 )
             )
         return statuses
@@ -622,6 +634,8 @@ class Joints:
             try:
                 health = await joint.driver.read_health(joint.servo_id)
             except ServoSilent as error:
+                if self.settings.battery is not None and joint.name == self.settings.battery.joint:
+                    self._battery_v = None  # a silent servo reads no battery
                 self._repeat(joint.name, "silent", str(error))
                 await self._latch(joint.name, FaultKind.SILENT, str(error))
                 continue
@@ -630,13 +644,15 @@ class Joints:
                 await self._bus_lost(self._on_driver(joint.driver), error)
                 continue
             self._recovered(joint.name)
+            if self.settings.battery is not None and joint.name == self.settings.battery.joint:
+                self._battery_v = health.voltage_v
             self._note_bits(joint.name, health)
             position = health.position
             if position is not None and not joint.settings.servo.readable(position):
                 detail = impossible_reading(joint.settings, position)
                 self._repeat(joint.name, FaultKind.IMPOSSIBLE.value, detail)
                 await self._latch(joint.name, FaultKind.IMPOSSIBLE, detail)
-            kind, detail = health.kind, ", ".join(health.flags)
+            kind, detail = health.kind, health.detail or ", ".join(health.flags)
             limit = self.settings.max_temperature_c
             hot = health.temperature_c
             if kind is None and hot is not None and hot >= limit:

@@ -14,6 +14,7 @@ from hal.errors import CodecError
 POLOLU_START = 0xAA
 DEFAULT_DEVICE = 12
 MAX_CHANNELS = 24
+ID_RANGE = (0, MAX_CHANNELS - 1)  # channels, the Maestro's "ids" (a Mini Maestro 24's)
 MAX_VALUE = 0x3FFF
 
 

@@ -44,6 +44,8 @@ Baud = Literal[
     666666, 1000000, 2000000, 3000000,
 ]  # fmt: skip
 BAUD_RATES: tuple[int, ...] = typing.get_args(Baud)
+# The most a HerkuleX voltage register holds: 255 counts of 0.074 V (manual, RAM 6/7/54).
+VOLTAGE_REGISTER_MAX_V = 18.87
 
 # A number that is neither infinite nor NaN (both fall outside these bounds).
 Finite = Annotated[
@@ -140,6 +142,48 @@ class BusSettings(_Settings, frozen=True):
     # the USB latency timer and scheduling. 20 ms covers an FTDI at 1 ms latency.
     timeout_margin_ms: Annotated[float, msgspec.Meta(gt=0, le=1000, extra={"unit": "ms"})] = 20.0
     retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
+    # HerkuleX only: the supply limits written to every servo's RAM (6, 7) at start, so
+    # that a battery above the factory limits (6.7-10.1 V) is not a voltage error. The
+    # servos' EEP is never written for them (only by `kasparctl servos set-voltage`).
+    min_voltage_v: Annotated[float, msgspec.Meta(ge=0, le=VOLTAGE_REGISTER_MAX_V,
+                                                 extra={"unit": "V"})] | None = None
+    max_voltage_v: Annotated[float, msgspec.Meta(ge=0, le=VOLTAGE_REGISTER_MAX_V,
+                                                 extra={"unit": "V"})] | None = None
+
+    def __post_init__(self) -> None:
+        """Voltage limits come in pairs, low below high, on a HerkuleX bus only."""
+        limits = (self.min_voltage_v, self.max_voltage_v)
+        if limits == (None, None):
+            return
+        where = f"bus {self.name!r}"
+        if self.protocol != "herkulex":
+            raise SettingsError(
+                f"{where}: min_voltage_v and max_voltage_v are HerkuleX registers; "
+                f"a {self.protocol} bus has none"
+            )
+        if None in limits:
+            raise SettingsError(f"{where}: give both min_voltage_v and max_voltage_v, or neither")
+        low, high = limits
+        assert low is not None and high is not None
+        if not low < high:
+            raise SettingsError(
+                f"{where}: min_voltage_v {low} must be below max_voltage_v {high}"
+            )
+
+    @property
+    def voltage_limits(self) -> tuple[float, float] | None:
+        """(min, max) volts for the servos' RAM, or None when the servos keep their own."""
+        if self.min_voltage_v is None or self.max_voltage_v is None:
+            return None
+        return self.min_voltage_v, self.max_voltage_v
+
+
+class BatterySettings(_Settings, frozen=True):
+    """`[servos.battery]`: which servo reads the battery, and when Kaspar says it is low."""
+
+    joint: Annotated[str, msgspec.Meta(pattern=r"\S", extra={"expected": "a joint name"})]
+    warn_below_v: Annotated[float, msgspec.Meta(gt=0, le=VOLTAGE_REGISTER_MAX_V,
+                                                extra={"unit": "V"})]
 
 
 class JointSettings(_Settings, frozen=True):
@@ -230,6 +274,7 @@ class ServoSettings(_Settings, frozen=True):
     joints: tuple[JointSettings, ...] = ()
     virtual_joints: tuple[VirtualJointSettings, ...] = ()
     couplings: tuple[CouplingSettings, ...] = ()
+    battery: BatterySettings | None = None  # absent: the battery is not watched
 
     def __post_init__(self) -> None:
         """Buses and joints agree with each other; SettingsError names the entry otherwise."""
@@ -270,6 +315,7 @@ class ServoSettings(_Settings, frozen=True):
             raise SettingsError("backend 'real' needs at least one joint")
         self._check_virtual(seen_names)
         self._check_couplings(seen_names)
+        self._check_battery(buses)
 
     def _check_virtual(self, real: set[str]) -> None:
         names: set[str] = set()
@@ -369,6 +415,27 @@ class ServoSettings(_Settings, frozen=True):
             lead = goals.get(leader, known.get(leader, rests[leader]))
             goals[follower] = own + coupling.ratio * (lead - rests[leader])
         return goals
+
+    def _check_battery(self, buses: dict[str, BusSettings]) -> None:
+        if self.battery is None:
+            return
+        joint = next((j for j in self.joints if j.name == self.battery.joint), None)
+        if joint is None:
+            known = ", ".join(j.name for j in self.joints) or "none configured"
+            raise SettingsError(
+                f"battery: joint {self.battery.joint!r} is not a configured joint ({known})"
+            )
+        if joint.servo.protocol == "maestro":
+            raise SettingsError(
+                f"battery: joint {joint.name!r} is a hobby servo on a Maestro, which reads no "
+                "voltage; name a joint whose servo reports its supply (HerkuleX, Dynamixel)"
+            )
+        limits = buses[joint.bus].voltage_limits
+        if limits is not None and not limits[0] <= self.battery.warn_below_v <= limits[1]:
+            raise SettingsError(
+                f"battery: warn_below_v {self.battery.warn_below_v} is outside bus "
+                f"{joint.bus!r}'s min_voltage_v..max_voltage_v {limits[0]}..{limits[1]}"
+            )
 
     def bus(self, name: str) -> BusSettings:
         """The bus called `name`; UnknownBus (a KeyError) if there is none."""

@@ -19,6 +19,12 @@ from hal.servos.api import FaultKind, Health
 from hal.servos.joints import Joints
 from hal.servos.settings import JointSettings, ServoModel, ServoSettings
 
+# The simulated battery: a charged LiFePO4 pack (Kaspar 3's, 10-13.5 V) losing a little
+# with every hour of the clock, so that a long simulated game sees it fall.
+SIM_BATTERY_FULL_V = 13.2
+SIM_BATTERY_FALL_V_PER_HOUR = 0.4
+SIM_BATTERY_EMPTY_V = 10.0
+
 
 @dataclass
 class SimServo:
@@ -58,6 +64,16 @@ class SimDriver:
     servos: dict[int, SimServo]
     writes: list[GoalWrite] = field(default_factory=list)
     _stamp: float | None = None
+    _since: float | None = None  # when the simulated battery was charged (the first start)
+    battery_full_v: float = SIM_BATTERY_FULL_V  # a test may start with a tired battery
+
+    def battery_v(self) -> float:
+        """The simulated battery's voltage now: falling slowly from full, never below empty."""
+        now = self.clock.now()
+        if self._since is None:
+            self._since = now
+        hours = (now - self._since) / 3600
+        return max(SIM_BATTERY_EMPTY_V, self.battery_full_v - SIM_BATTERY_FALL_V_PER_HOUR * hours)
 
     def _advance(self) -> None:
         now = self.clock.now()
@@ -81,8 +97,9 @@ class SimDriver:
         return servo
 
     async def start(self) -> None:
-        """Start the motion clock now."""
+        """Start the motion clock (and the battery's) now."""
         self._advance()
+        self.battery_v()
 
     async def close(self) -> None:
         """Nothing to release."""
@@ -134,13 +151,16 @@ class SimDriver:
         return 0
 
     async def read_health(self, servo_id: int) -> Health:
-        """The servo's temperature and injected fault (12 V, no load); ServoSilent if silent."""
+        """The servo's temperature, the battery's voltage, injected fault, no load.
+
+        ServoSilent if silent; a Maestro's hobby servo reads no voltage.
+        """
         self._advance()
         servo = self._answering(servo_id)
         return Health(
             position=servo.reading(),
             temperature_c=servo.temperature_c,
-            voltage_v=12.0,
+            voltage_v=None if servo.model.protocol == "maestro" else round(self.battery_v(), 2),
             load=0.0,
             flags=(servo.fault.name,) if servo.fault else (),
             kind=servo.fault,

@@ -15,11 +15,13 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from hal.clock import MonotonicClock
 from hal.servos.api import JointStatus
 from hal.servos.joints import Joints
+from hal.servos.ports import SYSFS, describe
 from hal.servos.settings import ServoSettings
 from kasparctl.body.behaviours import BehaviourError, load_library
 from kasparctl.body.check import absent_joints, problems
@@ -108,7 +110,7 @@ async def _servos(config: Config, speak: bool) -> list[Result]:
     if not config.servos.joints:
         return [Result("servos", False, "no joints configured in [servos]")]
     found, statuses, unavailable = await _inspect_servos(config.servos)
-    results = []
+    results = _ports(config.servos)
     answered = 0
     for bus_name, why in unavailable.items():
         # One line per adapter, not one per servo behind it.
@@ -142,6 +144,15 @@ async def _servos(config: Config, speak: bool) -> list[Result]:
     if answered == len(config.servos.joints):
         results.insert(0, Result("servos", True, f"all {answered} servos answered"))
     return results
+
+
+def _ports(settings: ServoSettings, sysfs: Path = SYSFS) -> list[Result]:
+    """One row per bus: the device its port is (node, vendor:product, interface, driver)."""
+    rows = []
+    for bus in settings.buses:
+        info = describe(bus.port, sysfs)
+        rows.append(Result("ports", info.node is not None, f"bus {bus.name}: {info}"))
+    return rows
 
 
 async def _inspect_servos(

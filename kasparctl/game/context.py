@@ -19,6 +19,7 @@ from typing import Any, Protocol, TypeVar
 from hal.servos.api import ServoApi
 from kasparctl.body.api import GazeKind
 from kasparctl.config import GameSettings, SessionPlan
+from kasparctl.game.battery import BatteryWatch
 from kasparctl.game.bodywork import PLAIN_POINT, BodyWork, PointStyle, point
 from kasparctl.game.events import GameEvent
 from kasparctl.game.opening import OpenedSession
@@ -64,6 +65,8 @@ class StepContext:
     emit: Emit
     # Behaviours the step does not wait for (a smile after an answer), kept until done.
     showing: set[asyncio.Future[None]]
+    # Whether the battery is already known to be low (outlives the game: Lasting).
+    battery: BatteryWatch
 
     @property
     def session(self) -> Session:

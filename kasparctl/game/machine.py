@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import msgspec
@@ -58,6 +58,7 @@ from hal.servos.api import Fault
 from kasparctl.body.api import Body, GazeKind
 from kasparctl.config import Config, SessionPlan
 from kasparctl.game import recovery
+from kasparctl.game.battery import BatteryWatch
 from kasparctl.game.bodywork import GREETING, BodyWork
 from kasparctl.game.context import StepContext
 from kasparctl.game.events import GameEvent, Listener
@@ -142,6 +143,8 @@ class Lasting:
     recorder: Recorder
     problems: Problems
     open_session: Callable[[], OpenedSession]
+    # Whether the battery is known to be low: said once per fall, whatever the session.
+    battery: BatteryWatch = field(default_factory=BatteryWatch)
 
     @classmethod
     def new(cls, event_log: EventLog | None, open_session: Callable[[], OpenedSession]) -> Lasting:
@@ -217,6 +220,7 @@ class Game:
         self.recorder = lasting.recorder
         self.problems = lasting.problems
         self._open_session = lasting.open_session
+        self._battery = lasting.battery
         self.speech = Speech(self.picker, self.hw.voice, self._record, self._voice_health)
         self.speech.failing = self.problems.get(FaultSource.VOICE)
         self.body = BodyWork(
@@ -695,6 +699,7 @@ class Game:
             recorder=self.recorder,
             emit=self._emit,
             showing=self._showing,
+            battery=self._battery,
         )
 
     async def _cancel_step(self) -> None:

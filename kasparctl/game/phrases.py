@@ -161,9 +161,10 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
         "fault.keyfob_back": _spec(about="the children's keyfob is back"),
         "fault.researcher_lost": _spec(about="the researcher's keypad is gone"),
         "fault.researcher_back": _spec(about="the researcher's keypad is back"),
-        "fault.battery_low": _spec(about="a remote's battery is below its warning level"),
+        "fault.remote_battery_low": _spec(about="a remote's battery is below its warning level"),
         "fault.problem": _spec(about="any other fault"),
         "fault.storage": _spec(about="the records cannot be saved: a grown-up must stop"),
+        "fault.battery_low": _spec(about="between trials: the battery fell below its line"),
         "session.abandoned": _spec(about="an unfinished session could not be resumed"),
         **{
             LINE_PREFIX + level: _spec(variety=_OFTEN, about=f"uncertainty level {level}")

@@ -48,6 +48,9 @@ class HalEvent(enum.StrEnum):
     RESEARCHER_BACK = "researcher_back"
     # A line that was not heard to its end (timed out or failed).
     VOICE = "voice"
+    # The battery fell below [servos.battery] warn_below_v, or came back above it.
+    BATTERY_LOW = "battery_low"
+    BATTERY_OK = "battery_ok"
 
 
 class FaultSource(enum.StrEnum):
@@ -163,7 +166,7 @@ class FaultRecord(Record, tag="fault", kw_only=True, frozen=True):
 
 
 class HalRecord(Record, tag="hal", kw_only=True, frozen=True):
-    """The keyfob lost or back, or a line of speech not heard to its end."""
+    """The keyfob lost or back, a line of speech not heard to its end, the battery low or ok."""
 
     event: HalEvent
     reason: str | UnsetType = UNSET  # keyfob_lost
@@ -171,6 +174,9 @@ class HalRecord(Record, tag="hal", kw_only=True, frozen=True):
     status: str | UnsetType = UNSET  # voice: the SpokenStatus value
     text: str | UnsetType = UNSET  # voice
     error: str | UnsetType | None = UNSET  # voice
+    voltage_v: float | UnsetType = UNSET  # battery_low, battery_ok: the reading
+    warn_below_v: float | UnsetType = UNSET  # battery: the line it crossed
+    joint: str | UnsetType = UNSET  # battery: whose servo read it
 
 
 class PoseRecord(Record, tag="pose", kw_only=True, frozen=True):

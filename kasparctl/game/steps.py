@@ -18,11 +18,12 @@ from typing import Any
 import msgspec
 from msgspec import UNSET
 
+from kasparctl.game.battery import Crossing
 from kasparctl.game.bodywork import FAREWELL, GREETING
 from kasparctl.game.context import StepContext
 from kasparctl.game.events import GameEvent
 from kasparctl.game.guess import Guess
-from kasparctl.game.records import PoseRecord, PressRecord, PromptRecord
+from kasparctl.game.records import HalEvent, HalRecord, PoseRecord, PressRecord, PromptRecord
 from kasparctl.game.state import GameState, far_from
 
 
@@ -93,7 +94,26 @@ class Steps:
                 await ctx.speech.say("steps.guessing")
             await ctx.speech.say("instructions.buttons")
         while not state.all_done:
+            await self._check_battery()
             await Guess(ctx).play()
+
+    async def _check_battery(self) -> None:
+        """Between trials: record a crossing of the battery's warning line; say a fall below it.
+
+        Once per crossing (game.battery): a battery that stays low is not said every trial.
+        """
+        ctx = self.ctx
+        reading = ctx.servos.battery()
+        if reading is None or reading.voltage_v is None:
+            return
+        crossing = ctx.battery.reading(reading.voltage_v, reading.warn_below_v)
+        if crossing is None:
+            return
+        event = HalEvent.BATTERY_LOW if crossing is Crossing.LOW else HalEvent.BATTERY_OK
+        ctx.record(HalRecord(event=event, voltage_v=round(reading.voltage_v, 2),
+                             warn_below_v=reading.warn_below_v, joint=reading.joint))
+        if crossing is Crossing.LOW:
+            await ctx.speech.say("fault.battery_low")
 
     async def farewell(self) -> None:
         """Step 5: Kaspar says what it learned, thanks the children, and rests."""

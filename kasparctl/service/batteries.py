@@ -3,7 +3,7 @@
 Where the kernel reports a battery (hal.keyfob.devices: a power_supply of scope Device,
 as Logitech's hidpp gives one), a level below the device's `battery_warn_percent` is
 said once: in STATUS= until the service stops, in the journal, and aloud to the grown-up
-at the first game ("fault.battery_low"). A device the kernel says nothing about is no
+at the first game ("fault.remote_battery_low"). A device the kernel says nothing about is no
 warning: most keyfobs never report a level.
 """
 

@@ -73,7 +73,7 @@ from kasparctl.log import configure_logging
 from kasparctl.service.batteries import low_batteries
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
 from kasparctl.service.sdnotify import Notifier, watchdog_interval
-from kasparctl.service.status import STATUS_WORDS, recovery_words, status_line
+from kasparctl.service.status import STATUS_WORDS, battery_words, recovery_words, status_line
 
 log = structlog.get_logger("kasparctl.service.daemon")
 
@@ -372,7 +372,7 @@ class Daemon:
             game.speech.announce_soon("session.abandoned")
         if self._say_batteries:
             self._say_batteries = False
-            game.speech.announce_soon("fault.battery_low")
+            game.speech.announce_soon("fault.remote_battery_low")
         return game
 
     async def _play(self, game: Game) -> None:
@@ -402,7 +402,8 @@ class Daemon:
         """STATUS=: the stage, Kaspar confused (and what reopen would do), the problems."""
         confused = recovery_words(game.session_state, game.settings)
         notices = " | ".join(n for n in (self._notice, self._batteries) if n) or None
-        return status_line(game.stage, game.problems, notices, confused)
+        battery = battery_words(self.hw.servos.battery() if self.hw is not None else None)
+        return status_line(game.stage, game.problems, notices, confused, battery)
 
     def _on_game_event(self, event: GameEvent, info: dict[str, Any]) -> None:
         game = self.game

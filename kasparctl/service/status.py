@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from hal.servos.api import BatteryReading
 from kasparctl.config import GameSettings
 from kasparctl.game import fold
 from kasparctl.game.records import FaultSource
@@ -54,9 +55,11 @@ def status_line(
     problems: Mapping[FaultSource, str] | None = None,
     notice: str | None = None,
     confused: str | None = None,
+    battery: str | None = None,
 ) -> str:
     """The STATUS= text for `stage` with `problems` (part -> why), each reason cut to a limit,
-    and a `notice` (a session abandoned) last; `confused` (recovery_words) after the stage."""
+    and a `notice` (a session abandoned); `confused` (recovery_words) after the stage, and
+    `battery` (battery_words) at the end."""
     words = STATUS_WORDS.get(stage, stage)
     if confused:
         words = f"{words} | {confused}"
@@ -67,7 +70,19 @@ def status_line(
     ]
     if notice:
         parts.append(_cut(notice, DETAIL_LIMIT))
-    return _cut(" | ".join([words, *parts]), STATUS_LIMIT)
+    line = _cut(" | ".join([words, *parts]), STATUS_LIMIT - len(battery or "") - 3)
+    return f"{line} | {battery}" if battery else line
+
+
+def battery_words(reading: BatteryReading | None) -> str | None:
+    """"battery 12.9 V", or "battery LOW: 11.6 V, below 11.8 V"; None when not watched."""
+    if reading is None:
+        return None
+    if reading.voltage_v is None:
+        return "battery not read yet"
+    if reading.low:
+        return f"battery LOW: {reading.voltage_v:.1f} V, below {reading.warn_below_v:.1f} V"
+    return f"battery {reading.voltage_v:.1f} V"
 
 
 def recovery_words(state: GameState | None, settings: GameSettings) -> str | None:

@@ -276,6 +276,8 @@ def _on_hal(view: SessionView, record: HalRecord) -> SessionView:
         return replace(view, keyfob_lost=True)
     if record.event is HalEvent.RESEARCHER_BACK:
         return view
+    if record.event in (HalEvent.BATTERY_LOW, HalEvent.BATTERY_OK):
+        return _on_battery(view, record)
     if record.event is HalEvent.RESEARCHER_LOST:
         # Nothing stops for it: the researcher's holds on the children's keyfob meanwhile.
         reason = record.reason if isinstance(record.reason, str) else "lost"
@@ -287,6 +289,15 @@ def _on_hal(view: SessionView, record: HalRecord) -> SessionView:
         detail += f"; {record.error}"
     seen = FaultSeen(record.time, "voice", detail)
     return replace(view, faults=(*view.faults, seen))
+
+
+def _on_battery(view: SessionView, record: HalRecord) -> SessionView:
+    volts = f"{record.voltage_v:.1f} V" if isinstance(record.voltage_v, float) else "? V"
+    line = record.warn_below_v if isinstance(record.warn_below_v, float) else None
+    if record.event is HalEvent.BATTERY_LOW:
+        below = f" (below {line:.1f} V)" if line is not None else ""
+        return replace(view, battery=f"LOW {volts}{below}", battery_low=True)
+    return replace(view, battery=f"ok {volts}", battery_low=False)
 
 
 def _on_pose(view: SessionView, record: PoseRecord) -> SessionView:

@@ -234,6 +234,8 @@ def _daemon_row(view: WatchView, session: SessionView | None, now: dt.datetime, 
         row.add(", ".join(problems), "bad")
     else:
         row.add("ok", "good")
+    if session is not None and session.battery is not None:
+        row.add("  battery ", "dim").add(session.battery, "warn" if session.battery_low else "good")
     if session is not None and session.last_time:
         row.right(
             f"last record {clock_time(session.last_time)}, {ago(session.last_time, now)}", "dim"

@@ -153,6 +153,10 @@ class SessionView:
     commands: tuple[CommandSeen, ...] = ()
     faults: tuple[FaultSeen, ...] = ()
     keyfob_lost: bool = False
+    # The battery as last recorded (a crossing of its warning line): "LOW 11.6 V (below
+    # 11.8 V)" or "ok 12.2 V"; None until a crossing is recorded.
+    battery: str | None = None
+    battery_low: bool = False
     # The targets given up (not learned in the session's limit of guesses), in order.
     given_up: tuple[str, ...] = ()
     # Kaspar is confused and asks the researcher (kasparctl.game.recovery): what to tell

@@ -68,6 +68,11 @@ def usec(value: str) -> float:
     return int(value) / 1e6
 
 
+def without_battery(status: str) -> str:
+    """STATUS= without its battery part ("... | battery 13.2 V"), which changes with time."""
+    return re.sub(r" \| battery [^|]*", "", status)
+
+
 @dataclass
 class Robot:
     """The service in the machine: what the checks ask and do."""
@@ -105,10 +110,10 @@ class Robot:
             time.sleep(0.1)
 
     def wait_for_status(self, status: str, timeout: float = 30.0) -> None:
-        """Wait until the service's STATUS= is `status`."""
+        """Wait until the service's STATUS= is `status` (its battery part aside: it falls)."""
 
         def reached() -> bool:
-            return self.show("StatusText")["StatusText"] == status
+            return without_battery(self.show("StatusText")["StatusText"]) == status
 
         try:
             self.wait_for(f"STATUS={status}", reached, timeout)

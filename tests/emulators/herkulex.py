@@ -16,7 +16,13 @@ register maps and section 5; a public capture for the position flags):
   detail says MOVING, INPOSITION and MOTOR_ON;
 - temperature rises while the servo holds a load or moves and falls back
   when it rests; at its limit (RAM 5) it latches EXCEED_TEMPERATURE;
-- each servo starts at its own position, voltage and temperature.
+- each servo starts at its own position, voltage and temperature; with `supply_v`
+  (a battery) every servo reads that voltage, and one outside its RAM Min/Max
+  Voltage (6, 7; copied from EEP 12, 13 at power-up: 0x5B-0x89, 6.7-10.1 V) latches
+  EXCEED_INPUT_VOLTAGE, at power-up too, which its torque policy acts on;
+- a temperature reading is a raw thermistor value (hx.TEMPERATURE_CENTI_C); a test
+  may pin a raw byte, 0xFF included, which no real servo sends;
+- EEP_WRITE of the id (EEP 6) takes effect at the next REBOOT, as the manual says.
 
 Tests can also move a limp joint "by hand": push() once, or hand() for a
 movement that follows the emulator's clock.
@@ -42,8 +48,10 @@ _EEP_DEFAULTS: dict[int, int] = {
     hx.Eep.MODEL_NO_2: 0x01, hx.Eep.VERSION_1: 0x00, hx.Eep.VERSION_2: 0x90,
     hx.Eep.BAUD_RATE: 0x10, hx.Eep.ACK_POLICY: hx.AckPolicy.READS_ONLY,
     hx.Eep.ALARM_LED_POLICY: 0x7F, hx.Eep.TORQUE_POLICY: hx.DEFAULT_TORQUE_POLICY,
-    hx.Eep.MAX_TEMPERATURE: 0xDF, hx.Eep.MIN_VOLTAGE: 0x5B, hx.Eep.MAX_VOLTAGE: 0x89,
+    # Max Temperature: 0xDE in the manual's default column (its text says 0xDF).
+    hx.Eep.MAX_TEMPERATURE: 0xDE, hx.Eep.MIN_VOLTAGE: 0x5B, hx.Eep.MAX_VOLTAGE: 0x89,
 }
+FACTORY_ID = 0xFD  # a new servo's id (manual: 253)
 MODEL_NO_1 = {"drs-0101": 0x01, "drs-0201": 0x02}
 
 
@@ -74,6 +82,8 @@ class Servo:
         self.heat_stamp: float | None = None  # emulator clock time of the last heat update
         self.latched = 0  # status error bits, until written back to zero
         self.detail = 0  # latched invalid-packet detail bits
+        self.supply_v: float | None = None  # the battery's voltage, if the test gave one
+        self.pinned_temperature: int | None = None  # a raw byte a test put in RAM 55
 
     @property
     def policy(self) -> int:
@@ -100,6 +110,7 @@ class HerkulexEmulator(Emulator):
         position_flags: int = CAPTURED_POSITION_FLAGS,
         heat_c_per_s: float = 2.0,
         cool_c_per_s: float = 0.2,
+        supply_v: float | None = None,
     ) -> None:
         self.servos: dict[int, Servo] = {}
         for servo_id in ids:
@@ -107,6 +118,8 @@ class HerkulexEmulator(Emulator):
             servo = Servo(servo_id, (models or {}).get(servo_id, "drs-0101"), position, rate)
             policy = ack_policy if isinstance(ack_policy, int) else ack_policy.get(servo_id, 1)
             servo.eep[hx.Eep.ACK_POLICY] = servo.ram[hx.Ram.ACK_POLICY] = policy
+            servo.supply_v = supply_v
+            self._power_up(servo)
             self.servos[servo_id] = servo
         self.position_flags = position_flags
         self.heat_c_per_s = heat_c_per_s
@@ -159,6 +172,17 @@ class HerkulexEmulator(Emulator):
         with self._lock:
             self.servos[servo_id].temperature_c = celsius
 
+    def pin_raw_temperature(self, servo_id: int, raw: int | None) -> None:
+        """RAM 55 reads `raw` from now on (None: the servo's own temperature again)."""
+        with self._lock:
+            self.servos[servo_id].pinned_temperature = raw
+
+    def set_supply(self, volts: float) -> None:
+        """The battery every servo is on now reads `volts`."""
+        with self._lock:
+            for servo in self.servos.values():
+                servo.supply_v = volts
+
     def latch(self, servo_id: int, bits: int) -> None:
         """The servo detects `bits` now: latched, and the torque policy applied."""
         with self._lock:
@@ -192,14 +216,30 @@ class HerkulexEmulator(Emulator):
             AMBIENT_C, servo.temperature_c - elapsed * self.cool_c_per_s * (not servo.load)
         )
         raw = hx.raw_temperature(servo.temperature_c)
-        servo.ram[hx.Ram.TEMPERATURE] = raw
+        # A pinned byte is what the reply says, not what the servo's protection sees.
+        servo.ram[hx.Ram.TEMPERATURE] = (
+            raw if servo.pinned_temperature is None else servo.pinned_temperature
+        )
         if raw >= servo.ram[hx.Ram.MAX_TEMPERATURE]:
             self._latch(servo, hx.StatusError.EXCEED_TEMPERATURE)
+
+    def _power_up(self, servo: Servo) -> None:
+        """What a servo checks as it powers up: its supply, against the limits it just copied."""
+        self._check_supply(servo)
+
+    def _check_supply(self, servo: Servo) -> None:
+        if servo.supply_v is None:
+            return
+        raw = min(0xFF, round(servo.supply_v / hx.VOLTS_PER_UNIT))
+        servo.ram[hx.Ram.VOLTAGE] = raw
+        if not servo.ram[hx.Ram.MIN_VOLTAGE] <= raw <= servo.ram[hx.Ram.MAX_VOLTAGE]:
+            self._latch(servo, hx.StatusError.EXCEED_INPUT_VOLTAGE)
 
     def _refresh(self, servo_id: int) -> None:
         now = self.clock()
         servo = self.servos[servo_id]
         self._heat(servo, now)
+        self._check_supply(servo)
         injected = self.faults.error_bits.get(servo_id, 0)
         if injected & ~servo.latched:
             self._latch(servo, injected)
@@ -295,11 +335,15 @@ class HerkulexEmulator(Emulator):
         if command in (hx.Command.STAT, hx.Command.ROLLBACK):
             return self._ack(servo_id, command)
         if command == hx.Command.REBOOT:
-            fresh = Servo(servo_id, "drs-0101", round(servo.axis.present), servo.axis.rate)
+            new_id = servo.eep[hx.Eep.ID]
+            fresh = Servo(new_id, "drs-0101", round(servo.axis.present), servo.axis.rate)
             fresh.eep[:] = servo.eep
             fresh.ram[0:48] = servo.eep[hx.Eep.ID : hx.Eep.ID + 48]
             fresh.temperature_c, fresh.heat_stamp = servo.temperature_c, servo.heat_stamp
-            self.servos[servo_id] = fresh
+            fresh.supply_v = servo.supply_v
+            self._power_up(fresh)
+            del self.servos[servo_id]
+            self.servos[new_id] = fresh  # the id written to EEP 6 counts from now
             self.faults.error_bits.pop(servo_id, None)
             return None
         self._invalid(servo_id, hx.StatusDetail.UNKNOWN_COMMAND)

@@ -10,7 +10,7 @@ the pulse width being sent, never where a hand put the horn.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from emulators.base import Axis, Emulator
@@ -21,7 +21,11 @@ class MaestroEmulator(Emulator):
     def __init__(
         self, path: Path, channels: int = 12, rate: float = 40000.0,
         clock: Callable[[], float] = time.monotonic,
+        inputs: Mapping[int, int] | None = None,
     ) -> None:
+        # Channels configured as inputs: Get Position reads the input (0-1023; a digital
+        # input, channels 12 and up of a Mini Maestro 18, reads 0 or 1023).
+        self.inputs = dict(inputs or {})
         self.channels = channels
         self.axes = [Axis(0, 0, rate) for _ in range(channels)]
         self.targets = [0] * channels
@@ -70,6 +74,9 @@ class MaestroEmulator(Emulator):
                 self._set(args[0] + offset, target)
         elif command is mo.Command.GET_POSITION:
             channel = args[0]
+            if channel in self.inputs:
+                value = self.inputs[channel]
+                return [(channel, bytes((value & 0xFF, value >> 8)))]
             position = round(self.axes[channel].update(self.clock())) if channel < self.channels else 0
             return [(channel, bytes((position & 0xFF, position >> 8)))]
         elif command is mo.Command.GET_ERRORS:
