@@ -72,6 +72,29 @@ CommandName = Annotated[
 ]
 
 
+class SeatSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only=True):
+    """One seat of `[[keyfob.children]]`: a keyfob of its own for the child sitting there.
+
+    `child` is the child's place in the group's turn order (1: a plan's first child), so
+    the seats stay as they are from group to group. The keyfob is opened like [keyfob]'s,
+    by `device` or `name` (exactly one), with [keyfob]'s keys and timings.
+    """
+
+    child: Annotated[int, msgspec.Meta(ge=1, le=6, extra={"expected": "a child's place, 1 to 6"})]
+    device: DevicePath | None = None
+    name: DeviceName | None = None
+
+    def __post_init__(self) -> None:
+        """Exactly one of device and name. Raises SettingsError (a ValueError)."""
+        if (self.device is None) == (self.name is None):
+            raise SettingsError("set device or name (exactly one) for each seat")
+
+    @property
+    def where(self) -> str:
+        """The device as the records name it: its path, or its name."""
+        return self.device or self.name or ""
+
+
 class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only=True):
     """The keyfob device, its key map and the gesture timings.
 
@@ -104,6 +127,8 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
     # After the device node returns, how long to keep retrying while udev
     # applies its group and mode.
     reopen_grace: Annotated[float, msgspec.Meta(gt=0, le=60, extra={"unit": "s"})] = 5.0
+    # One keyfob per child ([[keyfob.children]]): each a seat; none, one shared keyfob.
+    children: tuple[SeatSettings, ...] = ()
 
     def __post_init__(self) -> None:
         """Device and name exclude each other, keys resolve and differ, timings are ordered.
@@ -127,6 +152,12 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
             )
         if self.both_window >= self.long_press:
             raise SettingsError(f"both_window: expected < long_press, found {self.both_window}")
+        _check_seats(self.children)
+
+    def seat(self, index: int) -> KeyfobSettings:
+        """The settings seat `index`'s keyfob is opened with: this table's, its device."""
+        seat = self.children[index]
+        return msgspec.structs.replace(self, device=seat.device, name=seat.name, children=())
 
     @property
     def device_path(self) -> str | None:
@@ -144,6 +175,22 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
         for key, command in self.commands.items():
             mapping[key_code(_number_or_name(key))] = command
         return mapping
+
+
+def _check_seats(seats: tuple[SeatSettings, ...]) -> None:
+    """Each child seated once, each device a seat once."""
+    children: dict[int, int] = {}
+    devices: dict[str, int] = {}
+    for number, seat in enumerate(seats, start=1):
+        if seat.child in children:
+            raise SettingsError(
+                f"children[{number}].child: child {seat.child} is seated already "
+                f"(children[{children[seat.child]}])"
+            )
+        if seat.where in devices:
+            other = devices[seat.where]
+            raise SettingsError(f"children[{number}]: {seat.where!r} is children[{other}]'s keyfob")
+        children[seat.child] = devices[seat.where] = number
 
 
 def _code(field: str, key: str | int) -> int:
@@ -216,6 +263,14 @@ DEFAULT_RESEARCHER_KEYS = {
     "KEY_ESC": "stop",
     # A presenter's "start the slide show" key: re-open the name learned last.
     "KEY_F5": "reopen",
+    # Keys a presenter lacks (a keyboard-like device or a numeric keypad has them): in
+    # idle, choose the group and mark it absent; in step 4, a child away.
+    "KEY_C": "choose",
+    "KEY_A": "absent",
+    "KEY_W": "away",
+    "KEY_KPPLUS": "choose",
+    "KEY_KPMINUS": "absent",
+    "KEY_KPASTERISK": "away",
 }
 # A researcher's hold on the children's keyfob: longer than any child's press.
 Hold = Annotated[float, msgspec.Meta(ge=2.0, le=10.0, extra={"unit": "s"})]

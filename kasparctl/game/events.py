@@ -47,6 +47,11 @@ class GameEvent(enum.StrEnum):
     REOPENED = "reopened"
     # target, toy (names): the right toy of an open target is no longer offered.
     ALERT = "alert"
+    # group, number, absent: the researcher chose a planned session in idle, or marked
+    # its group absent (absent true) or took the mark back
+    CHOSEN = "chosen"
+    # change, child: a child taken out of step 4's rotation ("away") or brought back
+    ROTATION = "rotation"
 
 
 Listener = Callable[[GameEvent, dict[str, Any]], None]

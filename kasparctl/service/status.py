@@ -54,10 +54,12 @@ def status_line(
     problems: Mapping[FaultSource, str] | None = None,
     notice: str | None = None,
     confused: str | None = None,
+    waiting: str | None = None,
 ) -> str:
     """The STATUS= text for `stage` with `problems` (part -> why), each reason cut to a limit,
-    and a `notice` (a session abandoned) last; `confused` (recovery_words) after the stage."""
-    words = STATUS_WORDS.get(stage, stage)
+    and a `notice` (a session abandoned) last; `confused` (recovery_words) after the stage;
+    `waiting`, in idle, what "next" would start (kasparctl.game.opening.PlanQueue.words)."""
+    words = waiting if stage == "idle" and waiting else STATUS_WORDS.get(stage, stage)
     if confused:
         words = f"{words} | {confused}"
     parts = [
