@@ -48,6 +48,7 @@ from kasparctl.game.records import (
     PromptRecord,
     QuestionRecord,
     ReopenRecord,
+    RotationRecord,
     SessionEvent,
     SessionRecord,
     StepRecord,
@@ -218,8 +219,9 @@ def play_scenario(
 
 
 async def researcher_and_breakage(rig: DemoRig) -> None:
-    """The researcher's undo of an answer and of a re-open, a pause, a servo fault, the
-    keyfob lost and back: each at a question of its own (the game resumes each time)."""
+    """The researcher's undo of an answer and of a re-open, a child taken out of the rotation
+    and brought back, a pause, a servo fault, the keyfob lost and back: each at a question
+    of its own (the game resumes each time)."""
 
     async def at_question(trial: int) -> None:
         await on_event(rig, "question", lambda info: info["trial"] == trial)
@@ -232,6 +234,10 @@ async def researcher_and_breakage(rig: DemoRig) -> None:
     try:
         await at_question(4)
         await rig.command("undo")  # trial 3's answer
+        await at_question(5)
+        await rig.command("away")  # the child asked leaves: the next child is asked
+        await at_question(7)  # one cycle on, right after the child's turn was passed over
+        await rig.command("away")  # they are back, and asked
         await at_question(7)
         await rig.command("pause")
         await asyncio.sleep(3)
@@ -283,6 +289,8 @@ def test_every_reader_agrees_after_every_record_of_whole_games(games: list[Reade
     assert any(isinstance(r, SessionRecord) and r.event is SessionEvent.RESUMED for r in records)
     assert any(isinstance(r, FaultRecord) and r.joint == "head_yaw" for r in records)
     assert any(isinstance(r, HalRecord) and r.event is HalEvent.KEYFOB_LOST for r in records)
+    changes = [r.event for r in records if isinstance(r, RotationRecord)]
+    assert {"away", "skipped", "back"} <= set(changes), changes
     facts = [readers.reading.facts for readers in games]
     assert any(f.given_up for f in facts) and any(f.reopens for f in facts)
     assert any(g.confused for readers in games for g in readers.guesses.values())

@@ -33,8 +33,8 @@ class Seats:
         """Open every seat's keyfob and read each into the one stream."""
         for seat, keyfob in enumerate(self.keyfobs):
             await keyfob.start()
-            reader = self._read(seat, keyfob)
-            self._readers.append(asyncio.get_running_loop().create_task(reader, name=f"seat {seat}"))
+            loop = asyncio.get_running_loop()
+            self._readers.append(loop.create_task(self._read(seat, keyfob), name=f"seat {seat}"))
 
     async def _read(self, seat: int, keyfob: KeyfobInput) -> None:
         while True:
