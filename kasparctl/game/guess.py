@@ -103,7 +103,12 @@ class Guess:
 
     def _tell(self, event: GameEvent, plan: TrialPlan) -> None:
         self.ctx.emit(
-            event, target=plan.target, choice=plan.choice, trial=plan.trial, child=plan.child
+            event,
+            target=plan.target,
+            choice=plan.choice,
+            trial=plan.trial,
+            child=plan.child,
+            child_index=plan.child_index,
         )
 
     def _notice(self, record: TrialRecord) -> ConfusedRecord | None:
