@@ -645,6 +645,8 @@ class Game:
         except StorageFailed as error:
             await self._on_fault(storage_fault(error))
             return
+        # Idle again with nothing waiting: what "next" opens now is the plan's (STATUS=).
+        self._emit(GameEvent.WAITING_FOR_RESEARCHER, step="idle")
         await self.speech.announce("confirm.close")
 
     async def _start_session(self) -> None:

@@ -267,6 +267,13 @@ class PlanQueue:
             session.close()
 
 
+def is_absence(directory: Path) -> bool:
+    """Whether a session directory is a group's absence (never opened, never waiting)."""
+    with contextlib.suppress(OSError, *UNDECODABLE, AttributeError):
+        return msgspec.json.decode((directory / PLAN_FILE).read_bytes()).get("absent") is True
+    return False
+
+
 def _absence_stands(directory: Path) -> bool:
     """Whether an absence's last word is "absent" (not taken back)."""
     events = [

@@ -55,7 +55,7 @@ from kasparctl.game.jsonl import read_records
 from kasparctl.game.language import phrasebook_for
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.machine import Game, Lasting, Setup, Start
-from kasparctl.game.opening import OpenedSession, PlanQueue, open_new
+from kasparctl.game.opening import OpenedSession, PlanQueue, is_absence, open_new
 from kasparctl.game.phrases import PhraseBook, PhrasePicker
 from kasparctl.game.records import FaultSource, SessionEvent, SessionRecord, StepRecord
 from kasparctl.game.resume import (
@@ -93,6 +93,7 @@ _STATUS_EVENTS = (
     GameEvent.REOPENED,
     GameEvent.ANSWERED,
     GameEvent.CHOSEN,
+    GameEvent.WAITING_FOR_RESEARCHER,
 )
 
 
@@ -487,7 +488,8 @@ class Daemon:
         StorageFailed when it cannot be read; a stopped session that cannot be reopened
         (its records damaged since, its learner gone) stays closed, with a warning.
         """
-        directories = list(session_dirs(self.state_dir))
+        # A group marked absent was never opened: it is no session waiting.
+        directories = [d for d in session_dirs(self.state_dir) if not is_absence(d)]
         if not directories:
             return None
         latest = directories[-1]
