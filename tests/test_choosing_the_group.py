@@ -6,6 +6,7 @@ The daemon itself on the simulated rig (tests/fault_rig.py), in simulated time.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 from pathlib import Path
 
@@ -16,6 +17,9 @@ from kasparctl.cli import main
 from kasparctl.config import load_config
 from kasparctl.game.events import GameEvent
 from kasparctl.game.opening import PlanQueue
+from kasparctl.view.follow import Follower
+from kasparctl.view.frame import frame, plain_text
+from kasparctl.view.inotify import Inotify
 
 GROUPS = ("A1", "B2", "C3")
 
@@ -31,6 +35,13 @@ def three_groups(tmp_path: Path) -> Path:
         return text.replace("\n[servos]", more + "\n[servos]", 1)
 
     return write_config(tmp_path, "pilot", edit)
+
+
+def shown(state_dir: Path) -> list[str]:
+    """The live view's lines, as `kasparctl watch` draws them from the state directory."""
+    with Inotify() as inotify:
+        view = Follower(state_dir, inotify).observe()
+    return [plain_text(line) for line in frame(view, dt.datetime.now(dt.UTC))]
 
 
 def test_idle_choose_absent_choose_next(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -50,6 +61,7 @@ def test_idle_choose_absent_choose_next(tmp_path: Path, monkeypatch: pytest.Monk
         await chosen(rig, "choose C3", "choose")
         await chosen(rig, "C3 absent", "absent")
         await chosen(rig, "choose B2 again", "choose")
+        statuses["view"] = " / ".join(shown(rig.state_dir))
         statuses["said before next"] = " / ".join(rig.said())
         mark = len(rig.events)
         await rig.press("long green")  # next: starts the group chosen, B2
@@ -72,6 +84,9 @@ def test_idle_choose_absent_choose_next(tmp_path: Path, monkeypatch: pytest.Monk
     # Nothing was said to the children while the researcher chose (no chime configured).
     assert statuses["said before next"] == ""
     assert statuses["after"].startswith("waiting: 'next' starts group A1, session 1")
+    # The live view names the group chosen; the absences are no session it follows.
+    assert "CHOSEN group B2, session 1: 'next' starts it" in statuses["view"]
+    assert "No session yet" in statuses["view"]
 
     by_plan = {}
     for directory in (rig.state_dir / "sessions").iterdir():
@@ -84,7 +99,7 @@ def test_idle_choose_absent_choose_next(tmp_path: Path, monkeypatch: pytest.Monk
         ("session", "present"),  # chosen again and started: the mark taken back
     ]
     assert [(r["kind"], r["event"]) for r in by_plan["C3", True]] == [("session", "absent")]
-    started = [r for r in by_plan["B2", False] if r["kind"] == "command"][0]
+    started = next(r for r in by_plan["B2", False] if r["kind"] == "command")
     assert (started["command"], started["group"], started["number"]) == ("next", "B2", 1)
     # The researcher's choices are in the event log, each naming its group.
     events = [
@@ -103,7 +118,7 @@ def test_idle_choose_absent_choose_next(tmp_path: Path, monkeypatch: pytest.Monk
     # After a restart C3 is still absent, and not what "next" opens.
     queue = PlanQueue(rig.state_dir, lambda: load_config(str(config)))
     assert [(o.group, o.absent) for o in queue.offered()] == [("A1", False), ("C3", True)]
-    assert queue.take(0.0).group == "A1"
+    assert queue.take(lambda: 0.0).group == "A1"
 
 
 def test_sessions_lists_an_absent_group_as_absent(

@@ -189,9 +189,9 @@ class PlanQueue:
         self._chosen = None
         return Offer(offer.plan, absent=True)
 
-    def take(self, clock: float) -> SessionPlan:
-        """The plan "next" opens now (an absent group chosen is marked present first); the
-        researcher's choice is used up."""
+    def take(self, clock: Callable[[], float]) -> SessionPlan:
+        """The plan "next" opens now (an absent group chosen is marked present first, its
+        record stamped with `clock()`); the researcher's choice is used up."""
         plans = self._config().sessions
         if not plans:
             return SessionPlan(group="unplanned")
@@ -200,7 +200,7 @@ class PlanQueue:
         if offer is None:
             return plans[-1]
         if offer.absent:
-            self._mark(offer.plan, SessionEvent.PRESENT, clock)
+            self._mark(offer.plan, SessionEvent.PRESENT, clock())
         return offer.plan
 
     def words(self) -> str:

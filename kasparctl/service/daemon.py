@@ -480,7 +480,7 @@ class Daemon:
         or closes it with "stop": a stopped session waits for that choice, see
         _stopped_waiting).
         """
-        return self.queue.take(asyncio.get_running_loop().time())
+        return self.queue.take(lambda: asyncio.get_running_loop().time())
 
     def _stopped_waiting(self) -> OpenedSession | None:
         """The latest session, if the researcher stopped it and has not closed it yet.
