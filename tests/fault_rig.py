@@ -98,6 +98,29 @@ def write_config(
     return path
 
 
+SEATS = """
+[[keyfob.children]]
+child = 1
+device = "/dev/input/kaspar-seat1"
+
+[[keyfob.children]]
+child = 2
+device = "/dev/input/kaspar-seat2"
+"""
+
+
+def seated(tmp_path: Path, rule: str = "ignore") -> Path:
+    """The rig's pilot robot with a group of two, each child at a seat of their own
+    ([[keyfob.children]]), a press out of turn handled by `rule`."""
+
+    def edit(text: str) -> str:
+        text = text.replace("children_per_group = 1", "children_per_group = 2")
+        text = text.replace("[game]\n", f'[game]\nanswer_out_of_turn = "{rule}"\n', 1)
+        return text.replace("\n[servos]", SEATS + "\n[servos]", 1)
+
+    return write_config(tmp_path, "pilot", edit)
+
+
 class RecordedNotifier(Notifier):
     """What would go to systemd, kept: every STATUS= in order, READY, STOPPING."""
 

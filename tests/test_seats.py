@@ -12,31 +12,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from fault_rig import TOYS, FaultRig, run_daemon, write_config
+from fault_rig import TOYS, FaultRig, run_daemon, seated
 
 from kasparctl.config import ConfigError, load_config
 from kasparctl.game.events import GameEvent
-
-SEATS = """
-[[keyfob.children]]
-child = 1
-device = "/dev/input/kaspar-seat1"
-
-[[keyfob.children]]
-child = 2
-device = "/dev/input/kaspar-seat2"
-"""
-
-
-def seated(tmp_path: Path, rule: str = "ignore") -> Path:
-    """The rig's pilot robot with a group of two, each child at a seat of their own."""
-
-    def edit(text: str) -> str:
-        text = text.replace("children_per_group = 1", "children_per_group = 2")
-        text = text.replace("[game]\n", f'[game]\nanswer_out_of_turn = "{rule}"\n', 1)
-        return text.replace("\n[servos]", SEATS + "\n[servos]", 1)
-
-    return write_config(tmp_path, "pilot", edit)
 
 
 def wrong(rig: FaultRig, info: dict[str, Any]) -> str:
