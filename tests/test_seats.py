@@ -8,12 +8,20 @@ answer on the asked child's keyfob.
 from __future__ import annotations
 
 import asyncio
+import io
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 from fault_rig import TOYS, FaultRig, run_daemon, seated
 
+from hal.build import build
+from hal.clock import LoopClock
+from hal.keyfob.api import KeyfobLost
+from hal.keyfob.gestures import Gesture
+from hal.keyfob.seats import Seats
+from hal.keyfob.sim import SimKeyfob
 from kasparctl.config import ConfigError, load_config
 from kasparctl.game.events import GameEvent
 
@@ -103,21 +111,74 @@ def test_a_seat_whose_keyfob_is_away_is_passed_over_until_it_is_back(
     assert not [r for r in records if r["kind"] == "fault"]
 
 
-def test_the_seats_are_held_to_the_groups_they_serve(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("edit", "expected"),
+    [
+        (
+            lambda t: t.replace("children_per_group = 2", "children_per_group = 3"),
+            "keyfob.children: expected a seat for each of the 3 children of sessions[0], "
+            "found none for child 3",
+        ),
+        (
+            lambda t: t.replace("child = 2", "child = 1"),
+            "keyfob.children[1].child: expected each child seated once, found child 1 seated "
+            "already (keyfob.children[0])",
+        ),
+        (
+            lambda t: t.replace("kaspar-seat2", "kaspar-seat1"),
+            "keyfob.children[1]: expected a keyfob of its own, found "
+            "'/dev/input/kaspar-seat1', the keyfob of keyfob.children[0]",
+        ),
+        (
+            lambda t: t.replace('device = "/dev/input/kaspar-seat2"', 'name = "x"\ndevice = "/y"'),
+            "keyfob.children[1]: set device or name (exactly one) for each seat",
+        ),
+        (
+            lambda t: t.replace("child = 2", "child = 7"),
+            "keyfob.children[1].child: expected a child's place, 1 to 6, found 7",
+        ),
+        (
+            lambda t: t.replace('answer_out_of_turn = "ignore"', 'answer_out_of_turn = "maybe"'),
+            "game.answer_out_of_turn: expected one of 'ignore', 'take', found 'maybe'",
+        ),
+    ],
+)
+def test_the_seats_are_held_to_the_groups_they_serve(
+    tmp_path: Path, edit: Callable[[str], str], expected: str
+) -> None:
     path = seated(tmp_path)
-    text = path.read_text()
-    path.write_text(text.replace("children_per_group = 2", "children_per_group = 3"))
+    path.write_text(edit(path.read_text()))
     with pytest.raises(ConfigError) as caught:
         load_config(str(path))
-    assert caught.value.key == "keyfob.children"
-    assert caught.value.message == (
-        "expected a seat for each of the 3 children of sessions[1], found none for child 3"
+    assert str(caught.value) == f"{path}: {expected}"
+
+
+async def test_each_seat_s_events_come_tagged_with_its_seat() -> None:
+    clock = LoopClock()
+    first, second = SimKeyfob(clock), SimKeyfob(clock)
+    seats = Seats([first, second], ["/dev/input/a", "/dev/input/b"])
+    await seats.start()
+    try:
+        await second.perform("green")
+        event = await seats.next_event()
+        assert isinstance(event, Gesture) and (event.button, event.seat) == ("green", 1)
+        await first.perform("lost")
+        lost = await seats.next_event()
+        assert isinstance(lost, KeyfobLost) and lost.seat == 0
+        # One seat away: the seats are still read; the last away, they are not.
+        assert seats.connected and not seats.seat_connected(0)
+        await second.perform("lost")
+        assert (await seats.next_event()).seat == 1
+        assert not seats.connected
+    finally:
+        await seats.close()
+
+
+def test_the_simulated_hardware_has_a_keyfob_per_seat(tmp_path: Path) -> None:
+    config = load_config(str(seated(tmp_path)))
+    hardware = build(
+        config.servos, config.keyfob, config.voice, LoopClock(), sim=True, sim_keys=io.StringIO()
     )
-    path.write_text(text.replace("child = 2", "child = 1"))
-    with pytest.raises(ConfigError) as caught:
-        load_config(str(path))
-    assert "child 1 is seated already (children[1])" in str(caught.value)
-    path.write_text(text.replace('device = "/dev/input/kaspar-seat2"', 'name = "x"\ndevice = "/y"'))
-    with pytest.raises(ConfigError) as caught:
-        load_config(str(path))
-    assert "set device or name (exactly one) for each seat" in str(caught.value)
+    assert isinstance(hardware.keyfob, Seats)
+    assert hardware.keyfob.devices == ("/dev/input/kaspar-seat1", "/dev/input/kaspar-seat2")
+    assert len(hardware.keyfob.keyfobs) == 2

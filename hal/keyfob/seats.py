@@ -13,8 +13,12 @@ import asyncio
 import dataclasses
 from collections.abc import Sequence
 
-from hal.keyfob.api import InputEvent, KeyfobInput
+import structlog
+
+from hal.keyfob.api import InputEvent, KeyfobInput, KeyfobLost
 from hal.keyfob.gestures import GestureNeeds
+
+log = structlog.get_logger("hal.keyfob.seats")
 
 
 class Seats:
@@ -37,9 +41,15 @@ class Seats:
             self._readers.append(loop.create_task(self._read(seat, keyfob), name=f"seat {seat}"))
 
     async def _read(self, seat: int, keyfob: KeyfobInput) -> None:
-        while True:
-            event = await keyfob.next_event()
-            self._events.put_nowait(dataclasses.replace(event, seat=seat))
+        try:
+            while True:
+                event = await keyfob.next_event()
+                self._events.put_nowait(dataclasses.replace(event, seat=seat))
+        except Exception as error:
+            # A seat that can no longer be read is a seat away, never a silent one.
+            log.error("a seat's keyfob cannot be read", seat=seat + 1, exc_info=error)
+            at = asyncio.get_running_loop().time()
+            self._events.put_nowait(KeyfobLost(at=at, reason=f"cannot be read: {error}", seat=seat))
 
     async def next_event(self) -> InputEvent:
         """The next event of any seat, tagged with its seat."""

@@ -152,7 +152,6 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
             )
         if self.both_window >= self.long_press:
             raise SettingsError(f"both_window: expected < long_press, found {self.both_window}")
-        _check_seats(self.children)
 
     def seat(self, index: int) -> KeyfobSettings:
         """The settings seat `index`'s keyfob is opened with: this table's, its device."""
@@ -175,22 +174,6 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
         for key, command in self.commands.items():
             mapping[key_code(_number_or_name(key))] = command
         return mapping
-
-
-def _check_seats(seats: tuple[SeatSettings, ...]) -> None:
-    """Each child seated once, each device a seat once."""
-    children: dict[int, int] = {}
-    devices: dict[str, int] = {}
-    for number, seat in enumerate(seats, start=1):
-        if seat.child in children:
-            raise SettingsError(
-                f"children[{number}].child: child {seat.child} is seated already "
-                f"(children[{children[seat.child]}])"
-            )
-        if seat.where in devices:
-            other = devices[seat.where]
-            raise SettingsError(f"children[{number}]: {seat.where!r} is children[{other}]'s keyfob")
-        children[seat.child] = devices[seat.where] = number
 
 
 def _code(field: str, key: str | int) -> int:

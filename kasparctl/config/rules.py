@@ -281,8 +281,24 @@ def _check_seats(config: Config, fail: _Fail) -> None:
     seats = config.keyfob.children
     if not seats:
         return
-    seated = {seat.child for seat in seats}
-    plans = [(f"sessions[{i}]", plan) for i, plan in enumerate(config.sessions, start=1)]
+    children: dict[int, int] = {}
+    devices: dict[str, int] = {}
+    for index, seat in enumerate(seats):
+        if seat.child in children:
+            fail(
+                f"keyfob.children[{index}].child",
+                f"expected each child seated once, found child {seat.child} seated already "
+                f"(keyfob.children[{children[seat.child]}])",
+            )
+        if seat.where in devices:
+            fail(
+                f"keyfob.children[{index}]",
+                f"expected a keyfob of its own, found {seat.where!r}, the keyfob of "
+                f"keyfob.children[{devices[seat.where]}]",
+            )
+        children[seat.child] = devices[seat.where] = index
+    seated = set(children)
+    plans = [(f"sessions[{i}]", plan) for i, plan in enumerate(config.sessions)]
     sizes = [(where, config.group_size(plan)) for where, plan in plans] or [
         ("game.children_per_group", config.game.children_per_group)
     ]

@@ -398,16 +398,20 @@ class Game:
         elif isinstance(event, HardwareFault):
             await self._on_fault(event)
         elif isinstance(event, KeyfobLost):
+            # One seat of several away is passed over; the last one is the keyfob lost.
+            if event.seat is not None:
+                self.turn.absent_seats.add(event.seat)
             if event.seat is not None and self.hw.keyfob.connected:
                 await self._on_seat_lost(event, event.seat)
             else:
                 await self._on_keyfob_lost(event)
-        elif event.seat is not None and FaultSource.KEYFOB not in self.problems:
-            self._on_seat_back(event, event.seat)
         else:
             if event.seat is not None:
                 self.turn.absent_seats.discard(event.seat)
-            self._on_keyfob_back(event)
+            if event.seat is not None and FaultSource.KEYFOB not in self.problems:
+                self._on_seat_back(event, event.seat)
+            else:
+                self._on_keyfob_back(event)
 
     # -- whose input it is --------------------------------------------------------
 
@@ -745,7 +749,6 @@ class Game:
         """One seat's keyfob is gone, the others are read: that child's turns are passed
         over until it is back (asked now, the question goes to the next child)."""
         self._record(HalRecord(event=HalEvent.KEYFOB_LOST, reason=event.reason, seat=seat + 1))
-        self.turn.absent_seats.add(seat)
         seats = self.turn.seats
         asked = self.turn.asking
         if self.stage == "guessing" and seat < len(seats) and asked == seats[seat].child:
@@ -754,7 +757,6 @@ class Game:
 
     def _on_seat_back(self, event: KeyfobBack, seat: int) -> None:
         self._record(HalRecord(event=HalEvent.KEYFOB_BACK, device=event.device, seat=seat + 1))
-        self.turn.absent_seats.discard(seat)
 
     async def _rest_safely(self) -> None:
         try:
@@ -934,7 +936,8 @@ class Game:
             self._inputs.put(servo_fault(fault))
 
     async def _on_keyfob_lost(self, event: KeyfobLost) -> None:
-        self._record(HalRecord(event=HalEvent.KEYFOB_LOST, reason=event.reason))
+        seat = msgspec.UNSET if event.seat is None else event.seat + 1
+        self._record(HalRecord(event=HalEvent.KEYFOB_LOST, reason=event.reason, seat=seat))
         if FaultSource.KEYFOB in self.problems and self.stage not in FAULTABLE:
             # Known already (not there at the start, and the reader says so too).
             self.problems.set(FaultSource.KEYFOB, event.reason)
@@ -942,7 +945,8 @@ class Game:
         await self._on_fault(HardwareFault(FaultSource.KEYFOB, event.reason))
 
     def _on_keyfob_back(self, event: KeyfobBack) -> None:
-        self._record(HalRecord(event=HalEvent.KEYFOB_BACK, device=event.device))
+        seat = msgspec.UNSET if event.seat is None else event.seat + 1
+        self._record(HalRecord(event=HalEvent.KEYFOB_BACK, device=event.device, seat=seat))
         self.problems.set(FaultSource.KEYFOB, None)
         self._emit(GameEvent.KEYFOB_BACK)
         self.speech.announce_soon("fault.keyfob_back")
