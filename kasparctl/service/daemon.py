@@ -394,7 +394,13 @@ class Daemon:
         """STATUS=: the stage, Kaspar confused (and what reopen would do), the problems."""
         confused = recovery_words(game.session_state, game.settings)
         waiting = None
-        if game.stage == "idle" and game.session is None and game.stopped_waiting is None:
+        stopped = game.stopped_waiting
+        if game.stage == "idle" and game.session is None and stopped is not None:
+            waiting = (
+                f"waiting: 'next' reopens group {stopped.plan.group}, session "
+                f"{stopped.plan.number} (stopped), 'stop' closes it"
+            )
+        elif game.stage == "idle" and game.session is None:
             with contextlib.suppress(Exception):  # the words must never stop the robot
                 waiting = self.queue.words()
         return status_line(game.stage, game.problems, self._notice, confused, waiting)
