@@ -333,6 +333,12 @@ def test_every_reader_agrees_on_who_answered_with_a_keyfob_per_child(
     assert all(guess.seat in (1, 2) for guess in readers.guesses.values())
     changes = [r.event for r in readers.records if isinstance(r, RotationRecord)]
     assert changes[0] == "away" and "back" in changes and "skipped" in changes
+    given = [
+        (r.confirm, r.child_index)
+        for r in readers.records
+        if isinstance(r, CommandRecord) and r.command is Command.AWAY
+    ]
+    assert given == [(Confirmation.AWAY, 0), (Confirmation.BACK, 0)]
 
 
 # -- record sequences of any shape, made by the game's own rules ------------------------------

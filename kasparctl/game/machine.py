@@ -533,6 +533,11 @@ class Game:
             await self._refuse_resume(command)
             return
         applied = msgspec.structs.replace(command, applied=True, confirm=key)
+        away = self._away_record() if key in (Confirmation.AWAY, Confirmation.BACK) else None
+        if away is not None:
+            applied = msgspec.structs.replace(
+                applied, child=away.child, child_index=away.child_index
+            )
         if key in (Confirmation.CHOOSE, Confirmation.ABSENT):
             self._choose(key, applied)  # Kaspar does not even look: the children are there
             return
