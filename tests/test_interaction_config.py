@@ -25,7 +25,12 @@ def test_by_default_the_researcher_has_a_device_of_their_own_and_the_paper_scrip
     config = parse_config("", "kaspar.toml")
     assert config.researcher.source == "device"
     assert config.researcher.device_path == DEFAULT_RESEARCHER_DEVICE
-    assert set(config.researcher.keys.values()) == {"next", "pause", "undo", "stop", "reopen"}
+    assert set(config.researcher.keys.values()) == {
+        "next", "pause", "undo", "stop", "reopen", "choose", "absent", "away"
+    }  # fmt: skip
+    # Choose, absent and away on a keyboard-like device's letters and a numeric keypad's keys.
+    choose = [key for key, command in config.researcher.keys.items() if command == "choose"]
+    assert choose == ["KEY_C", "KEY_KPPLUS"]
     assert config.researcher.hold_s == 3.0
     # The holds on the children's keyfob (one keyfob, or the device away): no double.
     assert config.game.commands == {"long green": "next", "long red": "pause", "both": "stop"}
@@ -39,7 +44,7 @@ def test_by_default_the_researcher_has_a_device_of_their_own_and_the_paper_scrip
     [
         (
             "[researcher.keys]\nKEY_F1 = 'dance'",
-            "kaspar.toml: researcher.keys.KEY_F1: expected one of next, pause, undo, stop, reopen, found 'dance'",
+            "kaspar.toml: researcher.keys.KEY_F1: expected one of next, pause, undo, stop, reopen, away, choose, absent, found 'dance'",
         ),
         (
             "[researcher]\nkeys = { KEY_F1 = 'next', KEY_F2 = 'stop' }",
