@@ -461,51 +461,29 @@ class Game:
     def _seated(self, routed: ChildPress | ChildGesture, seat: int) -> None:
         """A press of a seat's own keyfob: credited to its child; from a child whose turn it
         is not, recorded and not taken (or taken, by the session's answer_out_of_turn)."""
-        seats = self.turn.seats
-        child = seats[seat].child if seat < len(seats) else None
-        seated = child is not None and self.plan is not None and child < self.config.group_size(
-            self.plan
-        )
-        if self.presses.waiting and self.turn.asking is not None:
-            ignored = None
-            if not seated:
-                ignored = "no child of this group at this seat"
-            elif self.turn.out_of_turn(seat) and self._out_of_turn() == "ignore":
-                ignored = rotation.OUT_OF_TURN
-            if ignored is not None:
-                gesture = routed.name if isinstance(routed, ChildGesture) else msgspec.UNSET
-                record = PressRecord(
-                    button=routed.button, at=routed.at, gesture=gesture, ignored=ignored
-                )
-                self._record(self._from_seat(record, seat, turn_of=self.turn.asking))
-                return
-        if isinstance(routed, ChildPress):
+        refused = None
+        if self.presses.waiting and self.plan is not None:
+            rule = self.plan.answer_out_of_turn or self.settings.answer_out_of_turn
+            refused = self.turn.refused(seat, self._group_size(), rule)
+        if refused is not None:
+            gesture = routed.name if isinstance(routed, ChildGesture) else msgspec.UNSET
+            record = PressRecord(
+                button=routed.button, at=routed.at, gesture=gesture, ignored=refused
+            )
+            self._record(self._from_seat(record, seat, turn_of=self.turn.asking))
+        elif isinstance(routed, ChildPress):
             self._child_press(routed.button, routed.at, seat)
         else:
             self._child_gesture(routed, seat)
-
-    def _out_of_turn(self) -> rotation.OutOfTurn:
-        """The session's rule for a press from a child whose turn it is not."""
-        planned = self.plan.answer_out_of_turn if self.plan is not None else None
-        return planned or self.settings.answer_out_of_turn
 
     def _from_seat(
         self, record: PressRecord, seat: int | None, turn_of: int | None = None
     ) -> PressRecord:
         """A press record saying which seat, device and child pressed."""
-        seats = self.turn.seats
-        if seat is None or seat >= len(seats):
-            return record
-        child = seats[seat].child
-        in_group = self.plan is not None and child < self.config.group_size(self.plan)
-        return msgspec.structs.replace(
-            record,
-            seat=seat + 1,
-            device=seats[seat].device,
-            pressed_by=self._child_name(child) if in_group else msgspec.UNSET,
-            pressed_by_index=child,
-            turn_of_index=msgspec.UNSET if turn_of is None else turn_of,
-        )
+        return self.turn.pressed(record, seat, self._group_size(), self._child_name, turn_of)
+
+    def _group_size(self) -> int:
+        return self.config.group_size(self.plan) if self.plan is not None else 0
 
     def _child_name(self, index: int) -> str:
         children = self.plan.children if self.plan is not None else ()

@@ -30,13 +30,15 @@ from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
+import msgspec
 from msgspec import UNSET
 
-from kasparctl.game.records import RotationRecord
+from kasparctl.game.records import PressRecord, RotationRecord
 from kasparctl.game.state import GameState
 
 OutOfTurn = Literal["ignore", "take"]
 OUT_OF_TURN = "out of turn"
+NO_CHILD_HERE = "no child of this group at this seat"
 KEYFOB_ABSENT = "keyfob absent"
 
 
@@ -130,3 +132,36 @@ class Turn:
     def out_of_turn(self, seat: int) -> bool:
         """Whether a press of `seat` now is from a child whose turn it is not."""
         return self.asking is not None and self.seats[seat].child != self.asking
+
+    def refused(self, seat: int, group_size: int, rule: OutOfTurn) -> str | None:
+        """Why a press of `seat` during the open question is not taken (recorded instead):
+        no child of this group sits there, or it is out of turn and the rule ignores it;
+        None: it is a press like any other (the answer, if one is awaited)."""
+        if self.asking is None:
+            return None
+        if not (0 <= seat < len(self.seats) and self.seats[seat].child < group_size):
+            return NO_CHILD_HERE
+        if self.out_of_turn(seat) and rule == "ignore":
+            return OUT_OF_TURN
+        return None
+
+    def pressed(
+        self,
+        record: PressRecord,
+        seat: int | None,
+        group_size: int,
+        name: Callable[[int], str],
+        turn_of: int | None = None,
+    ) -> PressRecord:
+        """`record` saying which seat, device and child pressed (unchanged without a seat)."""
+        if seat is None or not 0 <= seat < len(self.seats):
+            return record
+        child = self.seats[seat].child
+        return msgspec.structs.replace(
+            record,
+            seat=seat + 1,
+            device=self.seats[seat].device,
+            pressed_by=name(child) if child < group_size else UNSET,
+            pressed_by_index=child,
+            turn_of_index=UNSET if turn_of is None else turn_of,
+        )
