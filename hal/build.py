@@ -55,7 +55,8 @@ def build(
     built_servos = build_servos(servos, clock)
     own_device = researcher.source == "device"
     built_researcher: KeyfobInput | None = None
-    if sim or keyfob.backend == "sim" or sim_keys_fifo is not None:
+    simulated = sim or keyfob.backend == "sim" or sim_keys_fifo is not None
+    if simulated:
         from hal.keyfob.sim import FifoKeyfob, ResearcherKeys, SimKeyfob, TerminalKeyfob
 
         # The researcher's keys typed beside the children's reach a simulated device, or
@@ -89,6 +90,8 @@ def build(
                 built_researcher = Keyfob(
                     researcher, clock, role="researcher", needs=researcher.gesture_needs()
                 )
+    if keyfob.children:
+        built_keyfob = _seats(keyfob, clock, built_keyfob, simulated)
     if sim or voice.backend == "sim":
         from hal.voice.sim import SimVoice
 
@@ -98,3 +101,22 @@ def build(
 
         built_voice = Voice(voice, clock)
     return Hardware(built_servos, built_keyfob, built_voice, built_researcher)
+
+
+def _seats(
+    keyfob: KeyfobSettings, clock: Clock, first: KeyfobInput, simulated: bool
+) -> KeyfobInput:
+    """One keyfob per child ([[keyfob.children]]) as one stream. Simulated, the terminal's
+    (or the fifo's) keyfob is the first seat's, the others are silent twins."""
+    from hal.keyfob.seats import Seats
+
+    devices = [seat.where for seat in keyfob.children]
+    if simulated:
+        from hal.keyfob.sim import SimKeyfob
+
+        others = [SimKeyfob(clock) for _ in devices[1:]]
+        return Seats([first, *others], devices)
+    from hal.keyfob.reader import Keyfob
+
+    keyfobs = [Keyfob(keyfob.seat(index), clock) for index in range(len(devices))]
+    return Seats(keyfobs, devices)

@@ -19,6 +19,14 @@ class Command(enum.StrEnum):
     # Re-open the name learned last: it is offered again and its bag asked again
     # (kasparctl.game.recovery). Kaspar asks for it when it is confused.
     REOPEN = "reopen"
+    # One shared keyfob: take the child whose turn it is out of the rotation (a child who
+    # left); given right after a child's skipped turn, bring that child back
+    # (kasparctl.game.rotation).
+    AWAY = "away"
+    # In idle, before a session: step to the next planned session, and mark the chosen
+    # one's group absent (or take the mark back) without opening it (kasparctl.game.opening).
+    CHOOSE = "choose"
+    ABSENT = "absent"
 
 
 # Commands a session cannot be run without: every configuration must map a gesture to each.

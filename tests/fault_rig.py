@@ -24,7 +24,7 @@ import json
 import os
 import re
 import tomllib
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,7 @@ import pytest
 
 from hal import Hardware
 from hal.clock import LoopClock
+from hal.keyfob.seats import Seats
 from hal.keyfob.sim import COMMAND_GESTURES, SimKeyfob
 from hal.servos.sim import SimServos
 from hal.voice.sim import SimVoice
@@ -97,6 +98,29 @@ def write_config(
     return path
 
 
+SEATS = """
+[[keyfob.children]]
+child = 1
+device = "/dev/input/kaspar-seat1"
+
+[[keyfob.children]]
+child = 2
+device = "/dev/input/kaspar-seat2"
+"""
+
+
+def seated(tmp_path: Path, rule: str = "ignore") -> Path:
+    """The rig's pilot robot with a group of two, each child at a seat of their own
+    ([[keyfob.children]]), a press out of turn handled by `rule`."""
+
+    def edit(text: str) -> str:
+        text = text.replace("children_per_group = 1", "children_per_group = 2")
+        text = text.replace("[game]\n", f'[game]\nanswer_out_of_turn = "{rule}"\n', 1)
+        return text.replace("\n[servos]", SEATS + "\n[servos]", 1)
+
+    return write_config(tmp_path, "pilot", edit)
+
+
 class RecordedNotifier(Notifier):
     """What would go to systemd, kept: every STATUS= in order, READY, STOPPING."""
 
@@ -116,24 +140,30 @@ class RecordedNotifier(Notifier):
 
 
 class Children:
-    """Honest children: they answer each question with the answer key, and teach each bag."""
+    """Honest children: they answer each question with the answer key, and teach each bag.
 
-    def __init__(self, keyfob: SimKeyfob, answers: list[int]) -> None:
+    With one keyfob per child (`seats`), the child asked answers on their own seat's."""
+
+    def __init__(
+        self, keyfob: SimKeyfob, answers: list[int], seats: Sequence[SimKeyfob] = ()
+    ) -> None:
         self.keyfob = keyfob
         self.answers = answers
+        self.seats = list(seats)
         self.tasks: set[asyncio.Task[None]] = set()
 
     def __call__(self, event: GameEvent, info: dict[str, Any]) -> None:
         if event is GameEvent.QUESTION:
             right = info["choice"] == self.answers[info["target"]]
-            self._spawn("green" if right else "red")
+            keyfob = self.seats[info["child_index"]] if self.seats else self.keyfob
+            self._spawn("green" if right else "red", keyfob)
         elif event is GameEvent.TEACH:
             self._spawn("green")
 
-    def _spawn(self, action: str) -> None:
+    def _spawn(self, action: str, keyfob: SimKeyfob | None = None) -> None:
         async def press() -> None:
             await asyncio.sleep(1.0)  # a child thinks (simulated time)
-            await self.keyfob.perform(action)
+            await (keyfob or self.keyfob).perform(action)
 
         task = asyncio.get_running_loop().create_task(press())
         self.tasks.add(task)
@@ -187,6 +217,8 @@ class FaultRig:
     state_dir: Path
     children: Children
     events: list[tuple[GameEvent, dict[str, Any]]] = field(default_factory=list)
+    # One keyfob per child ([[keyfob.children]]): each seat's, in order.
+    seats: list[SimKeyfob] = field(default_factory=list)
     # stage -> what to do the moment the game enters it (once)
     at_state: dict[str, Callable[[], None]] = field(default_factory=dict)
     changed: asyncio.Condition = field(default_factory=asyncio.Condition)
@@ -284,6 +316,10 @@ class FaultRig:
         finally:
             self.voice.on_line = None
 
+    async def command(self, name: str) -> None:
+        """The researcher's command `name` on their own device ("choose", "away"...)."""
+        await self.researcher.perform(f"command {name}")
+
     async def press(self, action: str) -> None:
         """A child's key ("green", "red"), the keyfob lost or back, or the researcher's
         command by its old gesture's name ("long green" is next, on their own device)."""
@@ -295,6 +331,8 @@ class FaultRig:
 
 
 RESEARCHER_GESTURES = {gesture: command for command, gesture in COMMAND_GESTURES.items()}
+# The commands of the researcher's simulated device.
+RIG_COMMANDS = ("next", "pause", "undo", "stop", "away", "choose", "absent")
 
 
 async def _started(rig: FaultRig) -> None:
@@ -313,7 +351,8 @@ def run_daemon(
 ) -> FaultRig:
     """The daemon on the rig in simulated time, `scenario` beside it; stopped after it.
 
-    `config` replaces the rig's own configuration (write_config's, edited by `edit`).
+    `config` replaces the rig's own configuration (write_config's, edited by `edit`);
+    with [[keyfob.children]] in it, each seat has a simulated keyfob of its own.
     """
     config_path = config if config is not None else write_config(tmp_path, variant, edit)
     state_dir = tmp_path / "state"
@@ -328,19 +367,22 @@ def run_daemon(
         lines = io.StringIO()
         servos = SimServos(config.servos, clock)
         keyfob = SimKeyfob(clock)
-        researcher = SimKeyfob(clock, commands=("next", "pause", "undo", "stop"))
+        researcher = SimKeyfob(clock, commands=RIG_COMMANDS)
         voice = SimVoice(lines, clock, timeout=config.voice.timeout)
         answers = [TOYS.index(toy) for toy in config.sessions[0].answer_key]
-        children = Children(keyfob, answers)
+        seated = config.keyfob.children
+        seats = [SimKeyfob(clock) for _ in seated]
+        children = Children(keyfob, answers, seats)
+        keyfobs = Seats(seats, [seat.where for seat in seated]) if seats else keyfob
         changed = asyncio.Condition()
         notifier = RecordedNotifier(lambda: rig._wake())
         daemon = Daemon(
             DaemonOptions(str(config_path), sim=True, state_dir=str(state_dir)),
             notifier,
-            hardware=Hardware(servos, keyfob, voice, researcher),
+            hardware=Hardware(servos, keyfobs, voice, researcher),
         )
         rig = FaultRig(daemon, servos, keyfob, researcher, voice, notifier, lines, log, breakage,
-                       state_dir, children, changed=changed)  # fmt: skip
+                       state_dir, children, changed=changed, seats=seats)  # fmt: skip
         daemon.listeners += [rig._listener, children]
         result.append(rig)
         running = asyncio.create_task(daemon.run())

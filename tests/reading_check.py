@@ -52,6 +52,7 @@ def game_facts(state: GameState) -> dict[str, Any]:
         "confused": state.confused if isinstance(state.confused, int) else None,
         "undo": what,
         "previous": None if state.previous is None else (state.target, *state.previous),
+        "away": set() if state.away is UNSET else set(state.away),
     }
 
 
@@ -69,6 +70,7 @@ def read_facts(facts: Facts) -> dict[str, Any]:
         "previous": None
         if previous is None
         else (previous.target, previous.label, previous.green),
+        "away": set(facts.away),
     }
 
 
@@ -186,6 +188,8 @@ def research_agrees(directory: Path, readers: Readers) -> None:
             row["confused"],
             row["reopened"],
         ) == (guess.perseverative, guess.win_shift, guess.cause, guess.confused, guess.reopened)
+        # Who answered: the seat, and the child credited, as the records read.
+        assert (row["seat"], row["credited_child_number"]) == (guess.seat, guess.credited + 1)
     counted = [row for row in rows if not row["undone"]]
     (condition,) = by_condition([session], lambda _: readers.params)
     errors = [count_errors(problem.record.trials) for problem in condition.problems]

@@ -97,7 +97,7 @@ def test_relative_paths_are_relative_to_the_file(tmp_path: Path) -> None:
         ),
         ("[game\n", "kaspar.toml: (syntax): not valid TOML:"),
         ('[game.commands]\n"long blue" = "next"', "kaspar.toml: game.commands.long blue: expected a gesture, one of long green, long red, double green, double red, both"),
-        ('[game.commands]\n"long green" = "dance"', "kaspar.toml: game.commands.long green: expected one of next, pause, undo, stop, reopen, found 'dance'"),
+        ('[game.commands]\n"long green" = "dance"', "kaspar.toml: game.commands.long green: expected one of next, pause, undo, stop, reopen, away, choose, absent, found 'dance'"),
         ('[game]\ncommands = { "long green" = "next", "both" = "stop" }', "kaspar.toml: game.commands: expected a gesture for 'pause': a session cannot be run without it"),
         ('[game]\nvariant = "pilot"\nlocations = ["box", "shelf"]\n[game.poses.box]\nhead_yaw = 10.0', "kaspar.toml: game.poses: expected one pose per location (box, shelf), found box"),
         ("[game.poses.box]\nhead_yaw = 10.0", "kaspar.toml: game.poses: only the pilot variant has configured poses"),

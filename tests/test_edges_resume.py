@@ -83,7 +83,7 @@ def assert_abandoned(rig: FaultRig, directory: Path, reason: str) -> None:
     assert len(events) == 1 and directory.name in events[0]["reason"]
     assert reason in events[0]["reason"]
     status = next(s for s in rig.notifier.statuses if "abandoned" in s)
-    assert status.startswith("waiting: 'next' starts the session | session ")
+    assert status.startswith("waiting: 'next' starts group ") and " | session " in status
     assert directory.name in status
     sessions = sorted((rig.state_dir / "sessions").iterdir())
     assert len(sessions) == 2 and sessions[0] == directory

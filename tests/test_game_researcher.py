@@ -30,6 +30,7 @@ from kasparctl.vocabulary import Command
 
 C = Confirmation
 N, P, U, S, R = Command.NEXT, Command.PAUSE, Command.UNDO, Command.STOP, Command.REOPEN
+W, CH, AB = Command.AWAY, Command.CHOOSE, Command.ABSENT
 
 # Every (stage, command): what it confirms with the facts all false, and all true.
 # All true: the bags are taught, an answer can be undone, the keyfob is connected, a
@@ -85,6 +86,14 @@ TABLE: dict[tuple[str, Command], tuple[Confirmation | None, Confirmation | None]
     ("stopped", U): (None, None),
     ("stopped", S): (None, None),
     ("stopped", R): (None, None),
+    # A child away applies in step 4 only, with a child who can be taken out (or back).
+    **{(stage, W): (None, None) for stage in STATES if stage != "guessing"},
+    ("guessing", W): (None, C.AWAY),
+    # Choosing the group, and marking it absent: in idle only, with plans to choose from.
+    **{(stage, CH): (None, None) for stage in STATES if stage != "idle"},
+    **{(stage, AB): (None, None) for stage in STATES if stage != "idle"},
+    ("idle", CH): (None, C.CHOOSE),
+    ("idle", AB): (None, C.ABSENT),
 }
 
 
@@ -94,12 +103,19 @@ def facts(stage: str, on: bool, plays_names: bool = True) -> Facts:
     conditions = Conditions(
         plays_names=plays_names, bags_taught=on, all_done=False, resume_step=resume_step
     )
-    return Facts(conditions, undo_available=on, hardware_ready=on, reopen_available=on)
+    return Facts(
+        conditions,
+        undo_available=on,
+        hardware_ready=on,
+        reopen_available=on,
+        away=C.AWAY if on else None,
+        plans_to_choose=on,
+    )
 
 
 def test_the_table_covers_every_stage_and_command() -> None:
     assert set(TABLE) == set(itertools.product(STATES, Command))
-    assert len(TABLE) == 50
+    assert len(TABLE) == 80
 
 
 @pytest.mark.parametrize(("stage", "command"), sorted(TABLE), ids=lambda v: str(v))
@@ -128,6 +144,11 @@ def test_each_confirmation_fires_a_trigger_of_the_table() -> None:
         Confirmation.UNDO,
         Confirmation.CLOSE,
         Confirmation.REOPEN,
+        Confirmation.AWAY,
+        Confirmation.BACK,
+        Confirmation.CHOOSE,
+        Confirmation.ABSENT,
+        Confirmation.PRESENT,
     }
 
 

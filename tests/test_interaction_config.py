@@ -40,7 +40,7 @@ def test_by_default_the_researcher_has_a_device_of_their_own_and_the_paper_scrip
     [
         (
             "[researcher.keys]\nKEY_F1 = 'dance'",
-            "kaspar.toml: researcher.keys.KEY_F1: expected one of next, pause, undo, stop, reopen, found 'dance'",
+            "kaspar.toml: researcher.keys.KEY_F1: expected one of next, pause, undo, stop, reopen, away, choose, absent, found 'dance'",
         ),
         (
             "[researcher]\nkeys = { KEY_F1 = 'next', KEY_F2 = 'stop' }",

@@ -160,9 +160,10 @@ async def play(device, keyfob, clock, keys, advance) -> list[Gesture]:
 
 def test_every_profile_is_tested_and_reaches_every_command():
     assert set(profiles.names()) == set(SCENARIOS) == set(ANSWERS)
-    assert tuple(Command) == profiles.COMMANDS
+    assert set(Command) == set(profiles.COMMANDS)
     for name in profiles.names():
-        assert set(profiles.profile(name).commands.values()) == set(Command), name
+        given = set(profiles.profile(name).commands.values())
+        assert set(profiles.SESSION_COMMANDS) <= given <= set(Command), name
 
 
 @pytest.mark.parametrize("name", sorted(SCENARIOS))

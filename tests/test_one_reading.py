@@ -20,6 +20,7 @@ from typing import Any
 
 import msgspec
 import pytest
+from fault_rig import FaultRig, run_daemon, seated
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from reading_check import Readers, research_agrees
@@ -28,8 +29,9 @@ from rig_events import on_event
 
 from hal.servos.api import FaultKind
 from kasparctl.cli import main
-from kasparctl.config import Config, GameSettings, SessionPlan
+from kasparctl.config import Config, GameSettings, SessionPlan, load_config
 from kasparctl.game import recovery
+from kasparctl.game.events import GameEvent
 from kasparctl.game.fold import Reading
 from kasparctl.game.jsonl import encode_record
 from kasparctl.game.phrases import load_phrasebook
@@ -48,6 +50,7 @@ from kasparctl.game.records import (
     PromptRecord,
     QuestionRecord,
     ReopenRecord,
+    RotationRecord,
     SessionEvent,
     SessionRecord,
     StepRecord,
@@ -218,8 +221,9 @@ def play_scenario(
 
 
 async def researcher_and_breakage(rig: DemoRig) -> None:
-    """The researcher's undo of an answer and of a re-open, a pause, a servo fault, the
-    keyfob lost and back: each at a question of its own (the game resumes each time)."""
+    """The researcher's undo of an answer and of a re-open, a child taken out of the rotation
+    and brought back, a pause, a servo fault, the keyfob lost and back: each at a question
+    of its own (the game resumes each time)."""
 
     async def at_question(trial: int) -> None:
         await on_event(rig, "question", lambda info: info["trial"] == trial)
@@ -232,6 +236,10 @@ async def researcher_and_breakage(rig: DemoRig) -> None:
     try:
         await at_question(4)
         await rig.command("undo")  # trial 3's answer
+        await at_question(5)
+        await rig.command("away")  # the child asked leaves: the next child is asked
+        await at_question(7)  # one cycle on, right after the child's turn was passed over
+        await rig.command("away")  # they are back, and asked
         await at_question(7)
         await rig.command("pause")
         await asyncio.sleep(3)
@@ -283,11 +291,54 @@ def test_every_reader_agrees_after_every_record_of_whole_games(games: list[Reade
     assert any(isinstance(r, SessionRecord) and r.event is SessionEvent.RESUMED for r in records)
     assert any(isinstance(r, FaultRecord) and r.joint == "head_yaw" for r in records)
     assert any(isinstance(r, HalRecord) and r.event is HalEvent.KEYFOB_LOST for r in records)
+    changes = [r.event for r in records if isinstance(r, RotationRecord)]
+    assert {"away", "skipped", "back"} <= set(changes), changes
     facts = [readers.reading.facts for readers in games]
     assert any(f.given_up for f in facts) and any(f.reopens for f in facts)
     assert any(g.confused for readers in games for g in readers.guesses.values())
     # The reader not told the limit lagged, and only as far as a give-up.
     assert any(readers.lagged for readers in games)
+
+
+def test_every_reader_agrees_on_who_answered_with_a_keyfob_per_child(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two seats, a press out of turn taken (answer_out_of_turn = "take") and credited to
+    who pressed, and a child taken out of the rotation and brought back: the game's state,
+    the reading, the view and the CSV read the same records the same way."""
+
+    async def scenario(rig: FaultRig) -> None:
+        question = rig.event(GameEvent.QUESTION, lambda info: info["trial"] == 2)
+        await rig.press("long green")
+        info = await question
+        await asyncio.sleep(0.3)
+        await rig.seats[0].perform("green")  # the first child, out of turn: taken
+        await rig.event(GameEvent.QUESTION, lambda info: info["trial"] == 3)
+        await rig.command("away")  # the first child leaves
+        await rig.event(GameEvent.QUESTION, lambda info: info["trial"] == 5)
+        await rig.command("away")  # right after their skipped turn: back
+        await rig.event(GameEvent.QUESTION, lambda info: info["trial"] == 7)
+        await rig.press("both")
+        await rig.stage_is("idle")
+        assert info["child_index"] == 1
+
+    config_path = seated(tmp_path, "take")
+    rig = run_daemon(tmp_path, monkeypatch, scenario, config=config_path)
+    (readers,) = replayed(rig.state_dir, load_config(str(config_path)))
+    kinds = {type(record) for record in readers.records}
+    assert RotationRecord in kinds
+    credited = {trial: guess.credited for trial, guess in readers.guesses.items()}
+    asked = {r.trial: r.child_index for r in readers.records if isinstance(r, TrialRecord)}
+    assert credited[2] == 0 and asked[2] == 1  # taken out of turn, credited to who pressed
+    assert all(guess.seat in (1, 2) for guess in readers.guesses.values())
+    changes = [r.event for r in readers.records if isinstance(r, RotationRecord)]
+    assert changes[0] == "away" and "back" in changes and "skipped" in changes
+    given = [
+        (r.confirm, r.child_index)
+        for r in readers.records
+        if isinstance(r, CommandRecord) and r.command is Command.AWAY
+    ]
+    assert given == [(Confirmation.AWAY, 0), (Confirmation.BACK, 0)]
 
 
 # -- record sequences of any shape, made by the game's own rules ------------------------------

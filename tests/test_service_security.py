@@ -268,4 +268,6 @@ def test_records_hold_no_personal_data_beyond_the_plan(
         "participants",
         "group_size",
         "answer_key",
+        # With one keyfob per child: the rule for a press out of turn, no child's data.
+        "answer_out_of_turn",
     }

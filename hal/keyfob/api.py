@@ -19,6 +19,8 @@ class KeyfobLost:
 
     at: float
     reason: str
+    # With one keyfob per child (hal.keyfob.seats): whose seat's keyfob.
+    seat: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -27,6 +29,7 @@ class KeyfobBack:
 
     at: float
     device: str
+    seat: int | None = None
 
 
 InputEvent = Gesture | KeyfobLost | KeyfobBack

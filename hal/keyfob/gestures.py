@@ -73,6 +73,8 @@ class Gesture:
     decided: float
     # BOTH: the button that went down first ("green" or "red"); None for the others.
     first: str | None = None
+    # With one keyfob per child (hal.keyfob.seats): the seat whose keyfob it came from.
+    seat: int | None = None
 
 
 ANSWER = frozenset({GestureKind.PRESS})

@@ -36,7 +36,11 @@ _Fail = Callable[[str, str, object], SettingsError]
 
 # The commands a profile may give (kasparctl.vocabulary.Command, which hal cannot import;
 # tests/test_keyfob_profiles.py holds the two equal).
-COMMANDS = ("next", "pause", "undo", "stop", "reopen")
+# The commands every profile must reach: a session is run with these alone.
+SESSION_COMMANDS = ("next", "pause", "undo", "stop", "reopen")
+# Every command a profile may give (kasparctl.vocabulary.Command; hal may not import it):
+# choosing the group, marking it absent and a child away need keys a presenter lacks.
+COMMANDS = (*SESSION_COMMANDS, "away", "choose", "absent")
 # What a profile's gesture may be, before the button's name.
 GESTURE_KINDS = {"press": GestureKind.PRESS, "long": GestureKind.LONG, "double": GestureKind.DOUBLE}
 SLOTS = (GREEN, RED)

@@ -87,6 +87,29 @@ CommandName = Annotated[
 ]
 
 
+class SeatSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only=True):
+    """One seat of `[[keyfob.children]]`: a keyfob of its own for the child sitting there.
+
+    `child` is the child's place in the group's turn order (1: a plan's first child), so
+    the seats stay as they are from group to group. The keyfob is opened like [keyfob]'s,
+    by `device` or `name` (exactly one), with [keyfob]'s keys and timings.
+    """
+
+    child: Annotated[int, msgspec.Meta(ge=1, le=6, extra={"expected": "a child's place, 1 to 6"})]
+    device: DevicePath | None = None
+    name: DeviceName | None = None
+
+    def __post_init__(self) -> None:
+        """Exactly one of device and name. Raises SettingsError (a ValueError)."""
+        if (self.device is None) == (self.name is None):
+            raise SettingsError("set device or name (exactly one) for each seat")
+
+    @property
+    def where(self) -> str:
+        """The device as the records name it: its path, or its name."""
+        return self.device or self.name or ""
+
+
 class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only=True):
     """The keyfob device, its key map and the gesture timings.
 
@@ -130,6 +153,8 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
     reopen_grace: Annotated[float, msgspec.Meta(gt=0, le=60, extra={"unit": "s"})] = 5.0
     # A battery the kernel reports below this is warned of (`check`).
     battery_warn_percent: BatteryPercent = 20
+    # One keyfob per child ([[keyfob.children]]): each a seat; none, one shared keyfob.
+    children: tuple[SeatSettings, ...] = ()
 
     def __post_init__(self) -> None:
         """Device and name exclude each other, keys resolve and differ, timings are ordered.
@@ -154,6 +179,11 @@ class KeyfobSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw
             )
         if self.both_window >= self.long_press:
             raise SettingsError(f"both_window: expected < long_press, found {self.both_window}")
+
+    def seat(self, index: int) -> KeyfobSettings:
+        """The settings seat `index`'s keyfob is opened with: this table's, its device."""
+        seat = self.children[index]
+        return msgspec.structs.replace(self, device=seat.device, name=seat.name, children=())
 
     @property
     def device_path(self) -> str | None:

@@ -16,7 +16,8 @@ The terminal and fifo keyfobs are the children's keyfob and, when there is
 one, the researcher's device: g and r are the children's green and red, D a
 double green; G, R, d and b are the researcher's next, pause, undo and stop,
 given on the researcher's device, or as the keyfob gesture that means them
-when the researcher uses the children's keyfob.
+when the researcher uses the children's keyfob; o, c, a and w (reopen, choose,
+absent, away) only on their device.
 """
 
 from __future__ import annotations
@@ -272,12 +273,22 @@ TERMINAL_KEYS = {
     "l": "lost",
     "k": "back",
 }
-RESEARCHER_KEYS = {"G": "next", "R": "pause", "d": "undo", "b": "stop", "o": "reopen"}
+RESEARCHER_KEYS = {
+    "G": "next",
+    "R": "pause",
+    "d": "undo",
+    "b": "stop",
+    "o": "reopen",
+    # In idle: choose the group, mark it absent; in step 4: the child asked away (or back).
+    "c": "choose",
+    "a": "absent",
+    "w": "away",
+}
 # A command given on the children's keyfob when the researcher has no device of their own.
 COMMAND_GESTURES = {"next": "long green", "pause": "long red", "undo": "double red", "stop": "both"}
 TERMINAL_HELP = (
     "children: g green, r red, D double green; researcher: G next, R pause, d undo, "
-    "b stop, o reopen (their device); keyfob: l lost, k back"
+    "b stop, o reopen, c choose, a absent, w away (their device); keyfob: l lost, k back"
 )
 
 

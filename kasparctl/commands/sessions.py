@@ -2,8 +2,10 @@
 
 Status is "finished", "stopped" (the researcher's stop gesture),
 "interrupted" (the robot never reached the end: it resumes the most recent
-such session on its next start), or "damaged" (it cannot be read: the reason
-is given). Each session is read in one streaming pass, never held whole.
+such session on its next start), "absent" (the group was marked absent in
+idle and never opened; "absent, taken back" once chosen again), or "damaged"
+(it cannot be read: the reason is given). Each session is read in one
+streaming pass, never held whole.
 """
 
 from __future__ import annotations

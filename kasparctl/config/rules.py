@@ -39,6 +39,7 @@ def validate(config: Config, source: str) -> None:
     _check_game_servos(config, fail)
     _check_sessions(config, fail)
     _check_researcher(config, fail)
+    _check_seats(config, fail)
     _check_interaction(config.game, fail)
     _check_body(config, fail)
     _check_toy_names(config, source)
@@ -272,6 +273,43 @@ def _check_game_controls(
             "game.poses",
             "only the pilot variant has configured poses; step 2 teaches the bags' poses",
         )
+
+
+def _check_seats(config: Config, fail: _Fail) -> None:
+    """One keyfob per child: every child of every planned group has a seat (a child
+    without one could never answer their turn)."""
+    seats = config.keyfob.children
+    if not seats:
+        return
+    children: dict[int, int] = {}
+    devices: dict[str, int] = {}
+    for index, seat in enumerate(seats):
+        if seat.child in children:
+            fail(
+                f"keyfob.children[{index}].child",
+                f"expected each child seated once, found child {seat.child} seated already "
+                f"(keyfob.children[{children[seat.child]}])",
+            )
+        if seat.where in devices:
+            fail(
+                f"keyfob.children[{index}]",
+                f"expected a keyfob of its own, found {seat.where!r}, the keyfob of "
+                f"keyfob.children[{devices[seat.where]}]",
+            )
+        children[seat.child] = devices[seat.where] = index
+    seated = set(children)
+    plans = [(f"sessions[{i}]", plan) for i, plan in enumerate(config.sessions)]
+    sizes = [(where, config.group_size(plan)) for where, plan in plans] or [
+        ("game.children_per_group", config.game.children_per_group)
+    ]
+    for where, size in sizes:
+        missing = [child for child in range(1, size + 1) if child not in seated]
+        if missing:
+            fail(
+                "keyfob.children",
+                f"expected a seat for each of the {size} children of {where}, found none for "
+                f"child {', '.join(str(child) for child in missing)}",
+            )
 
 
 def _check_researcher(config: Config, fail: _Fail) -> None:

@@ -119,6 +119,7 @@ class LearnerSettings(_Settings, frozen=True):
 
 
 ExcludeLearned = Literal["names", "always", "never"]
+OutOfTurn = Literal["ignore", "take"]
 
 
 class GameSettings(_Settings, frozen=True):
@@ -190,6 +191,10 @@ class GameSettings(_Settings, frozen=True):
     # joint, degrees) is asked for once more; 0 never asks. Kaspar points with the
     # median of every pose shown for the bag.
     pose_check_deg: Annotated[float, msgspec.Meta(ge=0.0, le=360.0, extra={"unit": "deg"})] = 20.0
+    # One keyfob per child ([[keyfob.children]]): a press in step 4 from a child whose
+    # turn it is not is recorded and not taken ("ignore"), or taken as the answer and
+    # credited to that child ("take"). A session's plan may choose its own.
+    answer_out_of_turn: OutOfTurn = "ignore"
 
     @property
     def targets(self) -> tuple[str, ...]:
@@ -257,6 +262,8 @@ class SessionPlan(_Settings, frozen=True):
     group_size: Annotated[int, msgspec.Meta(ge=1, le=MAX_CHILDREN)] | None = None
     # The correct label for each target, in target order; for research records only.
     answer_key: tuple[str, ...] = ()
+    # With one keyfob per child: this session's game.answer_out_of_turn.
+    answer_out_of_turn: OutOfTurn | None = None
 
     @property
     def uncertainty_mode(self) -> UncertaintyMode:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
 from hal.servos.api import ServoApi
@@ -26,6 +26,7 @@ from kasparctl.game.opening import OpenedSession
 from kasparctl.game.presses import ChildPresses, Press
 from kasparctl.game.recorder import Recorder, loop_time
 from kasparctl.game.records import PromptRecord, Record
+from kasparctl.game.rotation import Turn
 from kasparctl.game.scripts import Script
 from kasparctl.game.session import Session
 from kasparctl.game.speech import Speech
@@ -67,6 +68,8 @@ class StepContext:
     showing: set[asyncio.Future[None]]
     # Whether the battery is already known to be low (outlives the game: Lasting).
     battery: BatteryWatch
+    # Whose turn the open question is, and which seat answered (kasparctl.game.rotation).
+    turn: Turn = field(default_factory=Turn)
 
     @property
     def session(self) -> Session:

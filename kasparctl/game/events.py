@@ -20,8 +20,9 @@ class GameEvent(enum.StrEnum):
     SESSION = "session"  # session: the id of the session just opened
     RESUMED = "resumed"  # step: the stage the resumed session carries on in
     WAITING_FOR_RESEARCHER = "waiting_for_researcher"  # step: idle, placing or revealing
-    # Kaspar starts asking: in step 4 trial, target, choice (indices), child; in step 2
-    # bag, round, mover, presser (children's names). Presses are early until it ends.
+    # Kaspar starts asking: in step 4 trial, target, choice (indices), child and its
+    # child_index; in step 2 bag, round, mover, presser (children's names). Presses are
+    # early until it ends.
     ASKING = "asking"
     # bag, round, mover, presser: Kaspar has asked for bag's pose (from 0) and waits.
     TEACH = "teach"
@@ -29,7 +30,8 @@ class GameEvent(enum.StrEnum):
     # What the game asked of Kaspar's body (kasparctl.game.bodywork): kind "look" (gaze,
     # index, name), "perform" (behaviour, strength) or "alive" (alive).
     BODY = "body"
-    # target, choice (indices), trial, child: the question is finished, Kaspar listens.
+    # target, choice (indices), trial, child, child_index: the question is finished,
+    # Kaspar listens.
     QUESTION = "question"
     LISTENING = "listening"  # (none): Kaspar shows it listens (its pose, its sound)
     PROMPT = "prompt"  # line: the prompt's phrase key (nobody answered)
@@ -47,6 +49,11 @@ class GameEvent(enum.StrEnum):
     REOPENED = "reopened"
     # target, toy (names): the right toy of an open target is no longer offered.
     ALERT = "alert"
+    # group, number, absent: the researcher chose a planned session in idle, or marked
+    # its group absent (absent true) or took the mark back
+    CHOSEN = "chosen"
+    # change, child: a child taken out of step 4's rotation ("away") or brought back
+    ROTATION = "rotation"
 
 
 Listener = Callable[[GameEvent, dict[str, Any]], None]

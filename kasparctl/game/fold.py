@@ -33,6 +33,10 @@ The rules:
   definitions of the two flags are kasparctl.learning.study_stats'.
 - **Undo**: takes back the last answer, or the last re-open; what it changed
   is as it was before, and nothing more can be undone until the next one.
+- **Who answered**: a trial's answer is credited to the child the records credit
+  (with one keyfob per child, the seat's child: `credited_index`), else to the
+  child asked; the children out of the rotation are those the researcher's
+  "away" took out and has not brought back (kasparctl.game.rotation).
 
 Pure: no I/O, no clock; nothing raises on records that do not fit (a reader
 reads sessions it did not write): a record that cannot apply changes nothing.
@@ -51,6 +55,7 @@ from kasparctl.game.records import (
     ConfusedRecord,
     QuestionRecord,
     ReopenRecord,
+    RotationRecord,
     StepRecord,
     TrialRecord,
     UndoRecord,
@@ -165,6 +170,10 @@ class Guess(msgspec.Struct, frozen=True):
     reopened: bool
     # It follows no answer: its target's first guess, or the first after a re-open.
     first: bool
+    # The child (place from 0) credited with the answer, and the seat (from 1) that
+    # answered with one keyfob per child (None with one shared keyfob).
+    credited: int = 0
+    seat: int | None = None
 
 
 class Facts(msgspec.Struct, frozen=True):
@@ -176,6 +185,8 @@ class Facts(msgspec.Struct, frozen=True):
     confused: Confusion | None = None
     learned_order: tuple[int, ...] = ()  # the targets learned, the one learned last at the end
     undo: Undoable | None = None
+    # The children (places from 0) the researcher took out of step 4's rotation.
+    away: frozenset[int] = frozenset()
 
     def target(self, index: int) -> Target:
         """Target `index` (one the records have not named yet: nothing about it)."""
@@ -242,6 +253,12 @@ class Reading:
             self._confused(record)
         elif isinstance(record, StepRecord) and record.to == "farewell":
             self._farewell()
+        elif isinstance(record, RotationRecord) and record.event != "skipped":
+            away = self.facts.away
+            child = frozenset({record.child_index})
+            self.facts = replace(
+                self.facts, away=away | child if record.event == "away" else away - child
+            )
         return None
 
     def _asking(self, index: int, name: str) -> Facts:
@@ -285,6 +302,12 @@ class Reading:
             confused=confused is not None and confused.target == index,
             reopened=target.reopened > 0,
             first=previous is None,
+            credited=(
+                record.credited_index
+                if isinstance(record.credited_index, int)
+                else record.child_index
+            ),
+            seat=record.seat if isinstance(record.seat, int) else None,
         )
         trials = target.trials + 1
         learned = (

@@ -11,8 +11,10 @@ from __future__ import annotations
 import asyncio
 from typing import cast
 
+import msgspec
+
 from kasparctl.body.api import GazeKind
-from kasparctl.game import recovery
+from kasparctl.game import recovery, rotation
 from kasparctl.game.bodywork import HAPPY, NOD, SAD, THINKING, PointStyle, point_style
 from kasparctl.game.context import StepContext
 from kasparctl.game.events import GameEvent
@@ -36,6 +38,12 @@ class Guess:
     async def play(self) -> None:
         """Ask, wait for the answer, record it (kasparctl.game.trial does the arithmetic), react."""
         ctx, state = self.ctx, self.ctx.state
+        turn = ctx.turn
+        # A child out of the rotation (away, or their keyfob absent) is passed over.
+        for skipped in rotation.skips(
+            state, ctx.group_size, turn.absent_children(), ctx.child_name, turn.seat_of
+        ):
+            ctx.change(skipped)
         plan = plan_trial(
             state, ctx.params, ctx.settings, ctx.plan, ctx.group_size, ctx.speech.book, ctx.script
         )
@@ -43,6 +51,7 @@ class Guess:
         ctx.record(question_record(plan))  # history only: the open question, for readers
         # From here a press is early, until the guess itself is said.
         answer = ctx.presses.open(ctx.now())
+        turn.asking, turn.answered_by = plan.child_index, None
         ctx.body.look_at(GazeKind.CHILD, plan.child_index, plan.child)
         self._tell(GameEvent.ASKING, plan)
         if ctx.group_size > 1 and state.turn < ctx.group_size:
@@ -60,6 +69,7 @@ class Guess:
             ),
         )
         question_end = ctx.presses.question_end
+        turn.asking = None
         heard = Answer(
             spoken, question_end, cast(Button, button), pressed_at, pressed_at < question_end
         )
@@ -67,7 +77,7 @@ class Guess:
         scored = score_answer(
             plan, heard, state, ctx.params, ctx.settings, ctx.plan, recovery=planned_with
         )
-        record = ctx.change(scored)
+        record = ctx.change(self._credited(scored, turn.answered_by))
         ctx.presses.answered(pressed_at, record.trial)
         ctx.emit(GameEvent.ANSWERED, trial=record.trial, feedback=button)
         confused = self._notice(record)
@@ -77,9 +87,28 @@ class Guess:
         if confused is not None:
             await self._say_confused(confused)
 
+    def _credited(self, scored: TrialRecord, seat: int | None) -> TrialRecord:
+        """With one keyfob per child: the seat that answered, and the child credited."""
+        seats = self.ctx.turn.seats
+        if seat is None or not 0 <= seat < len(seats):
+            return scored
+        child = seats[seat].child
+        return msgspec.structs.replace(
+            scored,
+            seat=seat + 1,
+            device=seats[seat].device,
+            credited=self.ctx.child_name(child),
+            credited_index=child,
+        )
+
     def _tell(self, event: GameEvent, plan: TrialPlan) -> None:
         self.ctx.emit(
-            event, target=plan.target, choice=plan.choice, trial=plan.trial, child=plan.child
+            event,
+            target=plan.target,
+            choice=plan.choice,
+            trial=plan.trial,
+            child=plan.child,
+            child_index=plan.child_index,
         )
 
     def _notice(self, record: TrialRecord) -> ConfusedRecord | None:

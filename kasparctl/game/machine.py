@@ -57,7 +57,7 @@ from hal.keyfob.gestures import Gesture
 from hal.servos.api import Fault
 from kasparctl.body.api import Body, GazeKind
 from kasparctl.config import Config, SessionPlan
-from kasparctl.game import recovery
+from kasparctl.game import recovery, rotation
 from kasparctl.game.battery import BatteryWatch
 from kasparctl.game.bodywork import GREETING, BodyWork
 from kasparctl.game.context import StepContext
@@ -73,7 +73,7 @@ from kasparctl.game.faults import (
 )
 from kasparctl.game.guess import LISTENING_SOUND
 from kasparctl.game.inputs import FromResearcher, GameInput, Inputs, StepEnded, describe
-from kasparctl.game.opening import OpenedSession, session_script
+from kasparctl.game.opening import OpenedSession, PlanQueue, session_script
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.presses import ChildPresses
 from kasparctl.game.recorder import Recorder, loop_time
@@ -84,7 +84,9 @@ from kasparctl.game.records import (
     FaultSource,
     HalEvent,
     HalRecord,
+    PressRecord,
     Record,
+    RotationRecord,
     SessionEvent,
     SessionRecord,
     StepRecord,
@@ -118,6 +120,8 @@ from kasparctl.vocabulary import Command
 
 log = structlog.get_logger(__name__)
 
+# The phrase key whose clip ([voice.clips]) chimes when the researcher chooses in idle.
+CHOSEN_SOUND = "cue.chosen"
 # How long a cancelled step may take to end before it is cancelled again.
 STEP_CANCEL_GRACE_S = 1.0
 
@@ -145,13 +149,20 @@ class Lasting:
     open_session: Callable[[], OpenedSession]
     # Whether the battery is known to be low: said once per fall, whatever the session.
     battery: BatteryWatch = field(default_factory=BatteryWatch)
+    # The planned sessions the researcher chooses from in idle (None: nothing to choose).
+    queue: PlanQueue | None = None
 
     @classmethod
-    def new(cls, event_log: EventLog | None, open_session: Callable[[], OpenedSession]) -> Lasting:
+    def new(
+        cls,
+        event_log: EventLog | None,
+        open_session: Callable[[], OpenedSession],
+        queue: PlanQueue | None = None,
+    ) -> Lasting:
         """No problems yet; records go to `event_log` while no session is open (with none,
         they are only logged)."""
         problems = Problems()
-        return cls(Recorder(event_log, problems), problems, open_session)
+        return cls(Recorder(event_log, problems), problems, open_session, queue=queue)
 
 
 @dataclass(frozen=True, slots=True)
@@ -221,6 +232,10 @@ class Game:
         self.problems = lasting.problems
         self._open_session = lasting.open_session
         self._battery = lasting.battery
+        self.queue = lasting.queue
+        # One keyfob per child ([[keyfob.children]]): whose each seat is, whose turn it is.
+        seats = config.keyfob.children
+        self.turn = rotation.Turn(tuple(rotation.Seat(s.child - 1, s.where) for s in seats))
         self.speech = Speech(self.picker, self.hw.voice, self._record, self._voice_health)
         self.speech.failing = self.problems.get(FaultSource.VOICE)
         self.body = BodyWork(
@@ -289,6 +304,7 @@ class Game:
     def _facts(self) -> Facts:
         """What, besides the stage, decides whether a researcher's command applies."""
         state = self.session_state
+        away = self._away_record()
         return Facts(
             self.conditions(),
             undo_available=state is not None and state.undo is not None,
@@ -296,6 +312,13 @@ class Game:
             stopped_waiting=self.stopped_waiting is not None and self.session is None,
             reopen_available=(
                 state is not None and recovery.reopen_record(state, self.settings) is not None
+            ),
+            away=None if away is None else Confirmation(away.event),
+            plans_to_choose=(
+                self.queue is not None
+                and self.session is None
+                and self.stopped_waiting is None
+                and bool(self.queue.offered())
             ),
         )
 
@@ -373,15 +396,26 @@ class Game:
         if isinstance(event, FromResearcher):
             await self._on_researcher_input(event.event)
         elif isinstance(event, Gesture):
-            await self._act(self.router.from_keyfob(event, self.presses.asking_at))
+            await self._act(self.router.from_keyfob(event, self.presses.asking_at), event.seat)
         elif isinstance(event, StepEnded):
             await self._on_step_ended(event)
         elif isinstance(event, HardwareFault):
             await self._on_fault(event)
         elif isinstance(event, KeyfobLost):
-            await self._on_keyfob_lost(event)
+            # One seat of several away is passed over; the last one is the keyfob lost.
+            if event.seat is not None:
+                self.turn.absent_seats.add(event.seat)
+            if event.seat is not None and self.hw.keyfob.connected:
+                await self._on_seat_lost(event, event.seat)
+            else:
+                await self._on_keyfob_lost(event)
         else:
-            self._on_keyfob_back(event)
+            if event.seat is not None:
+                self.turn.absent_seats.discard(event.seat)
+            if event.seat is not None and FaultSource.KEYFOB not in self.problems:
+                self._on_seat_back(event, event.seat)
+            else:
+                self._on_keyfob_back(event)
 
     # -- whose input it is --------------------------------------------------------
 
@@ -396,9 +430,11 @@ class Game:
         else:
             await self._act(self.router.from_device(event))
 
-    async def _act(self, routed: Routed) -> None:
+    async def _act(self, routed: Routed, seat: int | None = None) -> None:
         """Do what a gesture is: a child's answer, the researcher's command, or nothing."""
-        if isinstance(routed, ChildPress):
+        if isinstance(routed, ChildPress | ChildGesture) and seat is not None:
+            self._seated(routed, seat)
+        elif isinstance(routed, ChildPress):
             self._child_press(routed.button, routed.at)
         elif isinstance(routed, ChildGesture):
             self._child_gesture(routed)
@@ -407,20 +443,57 @@ class Game:
         else:
             self._record(routed.record)
 
-    def _child_press(self, button: str, at: float) -> None:
+    def _child_press(self, button: str, at: float, seat: int | None = None) -> None:
+        answering = self.presses.waiting
         outcome = self.presses.press(button, at, self.stage, self._now())
         if outcome.record is not None:
-            self._record(outcome.record)
+            self._record(self._from_seat(outcome.record, seat))
+        elif answering and not self.presses.waiting:
+            self.turn.answered_by = seat
         if outcome.acknowledge:
             self.speech.announce_soon("listen.wait")
 
-    def _child_gesture(self, gesture: ChildGesture) -> None:
+    def _child_gesture(self, gesture: ChildGesture, seat: int | None = None) -> None:
         """A child's hold or squeeze: its first key-down is a press like any other (the
         answer, if one is awaited), and what it went on to be is recorded, never acted on."""
         answering = self.presses.waiting
-        self._child_press(gesture.button, gesture.at)
+        self._child_press(gesture.button, gesture.at, seat)
         if answering and not self.presses.waiting:
-            self._record(self.presses.extra(gesture.button, gesture.at, gesture=gesture.name))
+            extra = self.presses.extra(gesture.button, gesture.at, gesture=gesture.name)
+            self._record(self._from_seat(extra, seat))
+
+    def _seated(self, routed: ChildPress | ChildGesture, seat: int) -> None:
+        """A press of a seat's own keyfob: credited to its child; from a child whose turn it
+        is not, recorded and not taken (or taken, by the session's answer_out_of_turn)."""
+        refused = None
+        if self.presses.waiting and self.plan is not None:
+            rule = self.plan.answer_out_of_turn or self.settings.answer_out_of_turn
+            refused = self.turn.refused(seat, self._group_size(), rule)
+        if refused is not None:
+            gesture = routed.name if isinstance(routed, ChildGesture) else msgspec.UNSET
+            record = PressRecord(
+                button=routed.button, at=routed.at, gesture=gesture, ignored=refused
+            )
+            self._record(self._from_seat(record, seat, turn_of=self.turn.asking))
+        elif isinstance(routed, ChildPress):
+            self._child_press(routed.button, routed.at, seat)
+        else:
+            self._child_gesture(routed, seat)
+
+    def _from_seat(
+        self, record: PressRecord, seat: int | None, turn_of: int | None = None
+    ) -> PressRecord:
+        """A press record saying which seat, device and child pressed."""
+        return self.turn.pressed(record, seat, self._group_size(), self._child_name, turn_of)
+
+    def _group_size(self) -> int:
+        return self.config.group_size(self.plan) if self.plan is not None else 0
+
+    def _child_name(self, index: int) -> str:
+        children = self.plan.children if self.plan is not None else ()
+        if index < len(children):
+            return children[index]
+        return self.speech.book.fill("names.child", number=str(index + 1))
 
     # -- the researcher's commands ------------------------------------------------
 
@@ -442,6 +515,14 @@ class Game:
             await self._refuse_resume(command)
             return
         applied = msgspec.structs.replace(command, applied=True, confirm=key)
+        away = self._away_record() if key in (Confirmation.AWAY, Confirmation.BACK) else None
+        if away is not None:
+            applied = msgspec.structs.replace(
+                applied, child=away.child, child_index=away.child_index
+            )
+        if key in (Confirmation.CHOOSE, Confirmation.ABSENT):
+            self._choose(key, applied)  # Kaspar does not even look: the children are there
+            return
         self.body.look_at(GazeKind.RESEARCHER, name="the researcher")
         if key is Confirmation.CLOSE:
             await self._close_stopped(applied)
@@ -461,6 +542,9 @@ class Game:
             await self.speech.announce(f"confirm.{key}")
         await self._fire(key)
         if opens_session:
+            plan = self.plan
+            if plan is not None and self.queue is not None:
+                applied = msgspec.structs.replace(applied, group=plan.group, number=plan.number)
             self._write(applied)
         await self._confirm_after(key)
 
@@ -514,6 +598,9 @@ class Game:
         if key is Confirmation.REOPEN:
             await self._reopen()
             return
+        if key in (Confirmation.AWAY, Confirmation.BACK):
+            await self._away()
+            return
         if key is Confirmation.START and self.session is None:
             if self.stopped_waiting is not None:
                 await self._reopen_stopped()
@@ -549,6 +636,8 @@ class Game:
         except StorageFailed as error:
             await self._on_fault(storage_fault(error))
             return
+        # Idle again with nothing waiting: what "next" opens now is the plan's (STATUS=).
+        self._emit(GameEvent.WAITING_FOR_RESEARCHER, step="idle")
         await self.speech.announce("confirm.close")
 
     async def _start_session(self) -> None:
@@ -600,6 +689,61 @@ class Game:
         await self.speech.announce("confirm.reopen", toy=record.name)
         self._start_step("guessing")
         return True
+
+    def _choose(self, key: Confirmation, command: CommandRecord) -> None:
+        """In idle: the next planned session chosen, or the chosen one's group marked absent
+        (or the mark taken back). Recorded in the event log (the absence in a session
+        directory of its own, kasparctl.game.opening); a chime, where one is configured,
+        and STATUS= and the live view name the group: the children hear no words."""
+        assert self.queue is not None  # the command applies only with a queue
+        try:
+            if key is Confirmation.CHOOSE:
+                offer = self.queue.choose()
+            else:
+                offer = self.queue.toggle_absent(self._now())
+                if not offer.absent:
+                    key = Confirmation.PRESENT
+        except StorageFailed as error:
+            self._inputs.put(storage_fault(error))
+            return
+        self._record(
+            msgspec.structs.replace(command, confirm=key, group=offer.group, number=offer.number)
+        )
+        if CHOSEN_SOUND in self.config.voice.clips:
+            self.speech.sound_soon(CHOSEN_SOUND)
+        self._emit(GameEvent.CHOSEN, group=offer.group, number=offer.number, absent=offer.absent)
+
+    def _away_record(self) -> RotationRecord | None:
+        """What the researcher's "away" would do now (kasparctl.game.rotation)."""
+        state, plan = self.session_state, self.plan
+        if state is None or plan is None or self.stage != "guessing":
+            return None
+        return rotation.away_command(state, self.config.group_size(plan), self._child_name)
+
+    async def _away(self) -> bool:
+        """The child whose turn it is out of the rotation, or the one skipped just now back:
+        the question is asked again, of the child whose turn it now is."""
+        record = self._away_record()
+        if record is None:
+            return False
+        await self._cancel_step()
+        self._change(record)
+        self._emit(GameEvent.ROTATION, change=record.event, child=record.child)
+        self._start_step("guessing")
+        return True
+
+    async def _on_seat_lost(self, event: KeyfobLost, seat: int) -> None:
+        """One seat's keyfob is gone, the others are read: that child's turns are passed
+        over until it is back (asked now, the question goes to the next child)."""
+        self._record(HalRecord(event=HalEvent.KEYFOB_LOST, reason=event.reason, seat=seat + 1))
+        seats = self.turn.seats
+        asked = self.turn.asking
+        if self.stage == "guessing" and seat < len(seats) and asked == seats[seat].child:
+            await self._cancel_step()
+            self._start_step("guessing")
+
+    def _on_seat_back(self, event: KeyfobBack, seat: int) -> None:
+        self._record(HalRecord(event=HalEvent.KEYFOB_BACK, device=event.device, seat=seat + 1))
 
     async def _rest_safely(self) -> None:
         try:
@@ -700,6 +844,7 @@ class Game:
             emit=self._emit,
             showing=self._showing,
             battery=self._battery,
+            turn=self.turn,
         )
 
     async def _cancel_step(self) -> None:
@@ -779,7 +924,8 @@ class Game:
             self._inputs.put(servo_fault(fault))
 
     async def _on_keyfob_lost(self, event: KeyfobLost) -> None:
-        self._record(HalRecord(event=HalEvent.KEYFOB_LOST, reason=event.reason))
+        seat = msgspec.UNSET if event.seat is None else event.seat + 1
+        self._record(HalRecord(event=HalEvent.KEYFOB_LOST, reason=event.reason, seat=seat))
         if FaultSource.KEYFOB in self.problems and self.stage not in FAULTABLE:
             # Known already (not there at the start, and the reader says so too).
             self.problems.set(FaultSource.KEYFOB, event.reason)
@@ -787,7 +933,8 @@ class Game:
         await self._on_fault(HardwareFault(FaultSource.KEYFOB, event.reason))
 
     def _on_keyfob_back(self, event: KeyfobBack) -> None:
-        self._record(HalRecord(event=HalEvent.KEYFOB_BACK, device=event.device))
+        seat = msgspec.UNSET if event.seat is None else event.seat + 1
+        self._record(HalRecord(event=HalEvent.KEYFOB_BACK, device=event.device, seat=seat))
         self.problems.set(FaultSource.KEYFOB, None)
         self._emit(GameEvent.KEYFOB_BACK)
         self.speech.announce_soon("fault.keyfob_back")

@@ -36,6 +36,10 @@ class SessionEvent(enum.StrEnum):
     ABANDONED = "abandoned"
     # The researcher closed a stopped session for good: its plan is done.
     CLOSED = "closed"
+    # The planned group did not come: marked absent in idle, never opened (the session's
+    # only records); PRESENT takes the mark back (the group came after all).
+    ABSENT = "absent"
+    PRESENT = "present"
 
 
 class HalEvent(enum.StrEnum):
@@ -82,6 +86,15 @@ class Confirmation(enum.StrEnum):
     CLOSE = "close"
     # The name learned last is learned no more (kasparctl.game.recovery).
     REOPEN = "reopen"
+    # In idle: the next planned session chosen; the chosen group marked absent, or the
+    # mark taken back (kasparctl.game.opening). Kaspar says nothing to the children.
+    CHOOSE = "choose"
+    ABSENT = "absent"
+    PRESENT = "present"
+    # Step 4: the child whose turn it is taken out of the rotation; a child brought back
+    # (kasparctl.game.rotation).
+    AWAY = "away"
+    BACK = "back"
 
 
 Button = Literal["green", "red"]
@@ -124,6 +137,12 @@ class CommandRecord(Record, tag="command", kw_only=True, frozen=True):
     # Where it came from: "researcher" (their own device), "keypad" (an extra key of
     # the children's keypad) or "keyfob" (a hold on the children's keyfob).
     source: str | UnsetType = UNSET
+    # choose, absent, and next starting a chosen session: the planned group and number.
+    group: str | UnsetType = UNSET
+    number: int | UnsetType = UNSET
+    # away: the child taken out or brought back.
+    child: str | UnsetType = UNSET
+    child_index: int | UnsetType = UNSET
 
 
 class PressRecord(Record, tag="press", kw_only=True, frozen=True):
@@ -145,6 +164,13 @@ class PressRecord(Record, tag="press", kw_only=True, frozen=True):
     # While teaching: the bag whose pose was asked again, and joints outside their range.
     teach_retry: int | UnsetType = UNSET
     outside: list[str] | UnsetType = UNSET
+    # One keyfob per child: the seat (from 1) and device pressed, the child seated there
+    # (their place from 0), and, for a press out of turn, the child whose turn it was.
+    seat: int | UnsetType = UNSET
+    device: str | UnsetType = UNSET
+    pressed_by: str | UnsetType = UNSET
+    pressed_by_index: int | UnsetType = UNSET
+    turn_of_index: int | UnsetType = UNSET
 
 
 class PromptRecord(Record, tag="prompt", kw_only=True, frozen=True):
@@ -177,6 +203,8 @@ class HalRecord(Record, tag="hal", kw_only=True, frozen=True):
     voltage_v: float | UnsetType = UNSET  # battery_low, battery_ok: the reading
     warn_below_v: float | UnsetType = UNSET  # battery: the line it crossed
     joint: str | UnsetType = UNSET  # battery: whose servo read it
+    # One keyfob per child: the seat (from 1) whose keyfob was lost or is back.
+    seat: int | UnsetType = UNSET
 
 
 class PoseRecord(Record, tag="pose", kw_only=True, frozen=True):
@@ -276,6 +304,13 @@ class TrialRecord(Record, tag="trial", kw_only=True, frozen=True):
     # Sessions planned with recovery (kasparctl.game.recovery): the labels (indices)
     # whose last answer on this target is red, after this answer. Absent before.
     rejected: list[int] | UnsetType = UNSET
+    # One keyfob per child: the seat (from 1) and device that answered, and the child
+    # credited with the answer (the seat's child: `child` unless an answer out of turn
+    # was taken, game.answer_out_of_turn = "take"). Absent with one shared keyfob.
+    seat: int | UnsetType = UNSET
+    device: str | UnsetType = UNSET
+    credited: str | UnsetType = UNSET
+    credited_index: int | UnsetType = UNSET
 
     @property
     def green(self) -> bool:
@@ -336,6 +371,23 @@ class AlertRecord(Record, tag="alert", kw_only=True, frozen=True):
     learned_for: str
 
 
+class RotationRecord(Record, tag="rotation", kw_only=True, frozen=True):
+    """Whose turn it is in step 4 changed without an answer (kasparctl.game.rotation).
+
+    `event` "away": the researcher took `child` out of the rotation; "back": brought
+    them back; "skipped": their turn was passed over, for `reason` ("away", or "keyfob
+    absent": their seat's keyfob is not connected). `turn` is the rotation's turn
+    (GameState.turn) after it. Changes the state.
+    """
+
+    event: Literal["away", "back", "skipped"]
+    child: str
+    child_index: int
+    turn: int
+    reason: str | UnsetType = UNSET
+    seat: int | UnsetType = UNSET
+
+
 AnyRecord = (
     SessionRecord
     | CommandRecord
@@ -351,6 +403,7 @@ AnyRecord = (
     | ConfusedRecord
     | ReopenRecord
     | AlertRecord
+    | RotationRecord
 )
 
 # Records that change GameState when applied; every other kind is history only.
@@ -362,4 +415,5 @@ STATE_CHANGING = (
     CommandRecord,
     ConfusedRecord,
     ReopenRecord,
+    RotationRecord,
 )

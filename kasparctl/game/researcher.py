@@ -40,7 +40,19 @@ TRIGGERS: Mapping[Confirmation, str] = {
 # start has no confirmation of its own: the greeting that begins the session is it.
 SPOKEN_FIRST = frozenset({Confirmation.NEXT_STEP, Confirmation.RESUME})
 # A re-open is confirmed by the game itself, naming the name it re-opens.
-SILENT = frozenset({Confirmation.START, Confirmation.REOPEN})
+SILENT = frozenset(
+    {
+        Confirmation.START,
+        Confirmation.REOPEN,
+        # The next child is named as Kaspar asks them: nothing else is said.
+        Confirmation.AWAY,
+        Confirmation.BACK,
+        # Before a session nothing is said to the children (a chime, where configured).
+        Confirmation.CHOOSE,
+        Confirmation.ABSENT,
+        Confirmation.PRESENT,
+    }
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,6 +66,11 @@ class Facts:
     stopped_waiting: bool = False
     # A learned name can be re-opened: one is learned, and a target is still open.
     reopen_available: bool = False
+    # What the researcher's "away" would do in step 4 (kasparctl.game.rotation): AWAY
+    # (the child asked taken out), BACK (the child skipped just now back), or None.
+    away: Confirmation | None = None
+    # In idle, before a session: planned sessions to choose from (none stopped waits).
+    plans_to_choose: bool = False
 
 
 def confirmation(stage: str, command: Command, facts: Facts) -> Confirmation | None:
@@ -73,6 +90,12 @@ def confirmation(stage: str, command: Command, facts: Facts) -> Confirmation | N
         return Confirmation.UNDO if stage == "guessing" and facts.undo_available else None
     if command is Command.REOPEN:
         return Confirmation.REOPEN if stage == "guessing" and facts.reopen_available else None
+    if command is Command.AWAY:
+        return facts.away if stage == "guessing" else None
+    if command in (Command.CHOOSE, Command.ABSENT):
+        if stage != "idle" or not facts.plans_to_choose:
+            return None
+        return Confirmation.CHOOSE if command is Command.CHOOSE else Confirmation.ABSENT
     if may("start", stage, conditions):
         return Confirmation.START
     if stage in RESEARCHER_MOVES_ON and may("advance", stage, conditions):

@@ -38,6 +38,7 @@ from kasparctl.game.records import (
     PoseRecord,
     Record,
     ReopenRecord,
+    RotationRecord,
     StepRecord,
     TrialRecord,
     UndoRecord,
@@ -106,6 +107,8 @@ class GameState(msgspec.Struct, eq=False):
     learned_order: list[int] | UnsetType = UNSET
     # the target Kaspar said it is confused about, until it is done or a name re-opened.
     confused: int | UnsetType | None = UNSET
+    # The children the researcher took out of step 4's rotation (kasparctl.game.rotation).
+    away: list[int] | UnsetType = UNSET
 
     @classmethod
     def new(cls, settings: GameSettings, params: LearnerParams, seed: int | None) -> GameState:
@@ -166,10 +169,22 @@ class GameState(msgspec.Struct, eq=False):
                 self._apply_reopen_taken_back(record)
             else:
                 self._apply_reopen(record)
+        elif isinstance(record, RotationRecord):
+            self._apply_rotation(record)
         elif (
             isinstance(record, CommandRecord) and record.applied and record.command is Command.PAUSE
         ):
             self.paused = record.confirm == Confirmation.PAUSE
+
+    def _apply_rotation(self, record: RotationRecord) -> None:
+        away = set() if self.away is UNSET else set(self.away)
+        if record.event == "away":
+            away.add(record.child_index)
+        elif record.event == "back":
+            away.discard(record.child_index)
+        if record.event != "skipped" or self.away is not UNSET:
+            self.away = sorted(away)
+        self.turn = record.turn
 
     def _done(self) -> list[bool]:
         return [progress.done for progress in self.progress]

@@ -101,6 +101,9 @@ class SessionIndex:
     children_seen: int = 0
     # Trials whose per-toy lists are not as long as the session's toys (damage).
     other_width: int = 0
+    # A group marked absent (never opened): True while the mark stands, False once taken
+    # back; None for every session that was opened.
+    absent: bool | None = None
     warnings: list[str] = field(default_factory=list)
 
     @property
@@ -268,7 +271,10 @@ class SessionData:
 
     @property
     def status(self) -> str:
-        """ "finished", "stopped" (the researcher's stop) or "interrupted" (never ended)."""
+        """ "finished", "stopped" (the researcher's stop) or "interrupted" (never ended); a
+        group marked absent in idle (never opened) "absent", or "absent, taken back"."""
+        if self.index.absent is not None:
+            return "absent" if self.index.absent else "absent, taken back"
         step = self.index.last_step
         return step if step in ("finished", "stopped") else "interrupted"
 
@@ -402,6 +408,11 @@ def index_session(directory: Path) -> SessionIndex:
             index.last_step = record.to
         elif isinstance(record, SessionRecord) and record.event is SessionEvent.RESUMED:
             index.resumed += 1
+        elif isinstance(record, SessionRecord) and record.event in (
+            SessionEvent.ABSENT,
+            SessionEvent.PRESENT,
+        ):
+            index.absent = record.event is SessionEvent.ABSENT
     if not toys:
         # Failing a full guess, positions are named from the choices.
         toys = tuple(chosen.get(i, f"toy {i + 1}") for i in range(width))

@@ -115,9 +115,12 @@ def by_condition(
 ) -> list[Condition]:
     """One Condition per label, sorted by label; `params` maps a profile name to its values.
 
-    `children`, if given, gets every child's teaching measures from the same pass.
+    `children`, if given, gets every child's teaching measures from the same pass. A group
+    marked absent (kasparctl.game.opening.PlanQueue) is left out.
     """
     conditions: dict[str, Condition] = {}
+    # A group marked absent was never taught: no session of any condition.
+    sessions = [session for session in sessions if session.index.absent is None]
     labelled = list(zip(sessions, condition_labels(sessions), strict=True))
     for index, (session, label) in enumerate(progress(labelled, "reading records", "session")):
         condition = conditions.setdefault(

@@ -105,6 +105,10 @@ def trial_header(toys: dict[str, str], participants: Participants = NO_PARTICIPA
         "child_number",
         "participant",
         *(f"participant_{column}" for column in participants.columns),
+        "seat",
+        "device",
+        "credited_child_number",
+        "credited_participant",
         "candidates",
         "n_candidates",
         *per_toy("p_"),
@@ -162,6 +166,12 @@ def trial_rows(
                 f"participant_{column}": value
                 for column, value in participants.attributes(code).items()
             },
+            # One keyfob per child: the seat that answered, and the child credited
+            # (kasparctl.game.fold: the seat's child, else the child asked).
+            "seat": guess.seat,
+            "device": trial.device if isinstance(trial.device, str) else None,
+            "credited_child_number": guess.credited + 1,
+            "credited_participant": session.participant(guess.credited),
             "candidates": trial.candidates,
             "n_candidates": len(trial.candidates),
             "entropy": trial.entropy,
@@ -231,6 +241,7 @@ _EVENT_NAME = {
     "confused": "reason",
     "reopen": "name",
     "alert": "alert",
+    "rotation": "event",
 }
 
 

@@ -13,8 +13,10 @@ Streamed, so a session of any size is read in constant memory. What is added:
 - for a prompt while guessing, an extra press and an undo: the child it
   concerns (whose question went unanswered, whose answer got the extra
   press, whose answer was taken back), by place in the turn order. Children
-  answer in rotation: the child of the next question is (answers recorded -
-  answers undone) modulo the group size, as the game counts it.
+  answer in rotation: the child of the next question is the rotation's turn
+  modulo the group size, as the game counts it (an answer moves it on, an undo
+  back, a `rotation` record sets it: a child away passed over); for a press of
+  a seat's own keyfob, the seat's child, and for a rotation record, its child.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from kasparctl.game.records import (
     AnyRecord,
     PressRecord,
     PromptRecord,
+    RotationRecord,
     StepRecord,
     TrialRecord,
     UndoRecord,
@@ -65,25 +68,32 @@ def walk(session: SessionData) -> Iterator[Walked]:
     size = session.group_size
     step = ""
     turn = 0
-    recent: OrderedDict[int, int] = OrderedDict()
+    # trial -> (its child, the rotation's turn before it): an undo goes back there.
+    recent: OrderedDict[int, tuple[int, int]] = OrderedDict()
     # The research is not told the session's limit of guesses: a give-up is read when
     # the game moves on, which is before any later trial.
     reading = Reading()
     for record in session.records():
         guess = reading.apply(record)
         if isinstance(record, TrialRecord):
-            recent[record.trial] = record.child_index
+            recent[record.trial] = (record.child_index, turn)
             if len(recent) > _RECENT_TRIALS:
                 recent.popitem(last=False)
             turn += 1
             yield Walked(record, record.child_index, record.trial in undone, guess, reading.facts)
         elif isinstance(record, UndoRecord):
-            turn -= 1
-            yield Walked(record, recent.get(record.trial), facts=reading.facts)
-        elif isinstance(record, PressRecord):
-            extra = record.extra is True and isinstance(record.trial, int)
-            child = recent.get(record.trial) if extra else None  # type: ignore[arg-type]
+            child, turn = recent.get(record.trial, (None, turn - 1))
             yield Walked(record, child, facts=reading.facts)
+        elif isinstance(record, RotationRecord):
+            turn = record.turn  # a child out of the rotation passed over, taken out, back
+            yield Walked(record, record.child_index, facts=reading.facts)
+        elif isinstance(record, PressRecord):
+            if isinstance(record.pressed_by_index, int):  # a seat's own keyfob
+                yield Walked(record, record.pressed_by_index)
+                continue
+            extra = record.extra is True and isinstance(record.trial, int)
+            answered = recent.get(record.trial) if extra else None  # type: ignore[arg-type]
+            yield Walked(record, None if answered is None else answered[0], facts=reading.facts)
         elif isinstance(record, PromptRecord):
             yield Walked(record, turn % size if step == "guessing" else None, facts=reading.facts)
         else:

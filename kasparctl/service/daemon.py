@@ -51,11 +51,11 @@ from kasparctl.body.build import make_body
 from kasparctl.config import Config, ConfigError, SessionPlan, load_config, servo_backend_given
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.faults import HardwareFault
-from kasparctl.game.jsonl import UNDECODABLE, read_records
+from kasparctl.game.jsonl import read_records
 from kasparctl.game.language import phrasebook_for
 from kasparctl.game.lock import StateDirBusy, StateDirLock
 from kasparctl.game.machine import Game, Lasting, Setup, Start
-from kasparctl.game.opening import OpenedSession, open_new
+from kasparctl.game.opening import OpenedSession, PlanQueue, is_absence, open_new
 from kasparctl.game.phrases import PhraseBook, PhrasePicker
 from kasparctl.game.records import FaultSource, SessionEvent, SessionRecord, StepRecord
 from kasparctl.game.resume import (
@@ -66,7 +66,7 @@ from kasparctl.game.resume import (
     reopen,
     resume_or_abandon,
 )
-from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, EventLog, is_finished, session_dirs
+from kasparctl.game.session import RECORDS_FILE, EventLog, is_finished, session_dirs
 from kasparctl.game.stages import ENDS
 from kasparctl.game.storage import StorageFailed
 from kasparctl.log import configure_logging
@@ -93,6 +93,8 @@ _STATUS_EVENTS = (
     GameEvent.CONFUSED,
     GameEvent.REOPENED,
     GameEvent.ANSWERED,
+    GameEvent.CHOSEN,
+    GameEvent.WAITING_FOR_RESEARCHER,
 )
 
 
@@ -136,7 +138,9 @@ class Daemon:
         self.listeners = list(listeners)
         self.events = EventLog(self._state_dir)
         # What outlives each game: the records the disk refused, and what is not working.
-        self.lasting = Lasting.new(self.events, self._open_session)
+        # The planned sessions, and the researcher's choice among them in idle.
+        self.queue = PlanQueue(self._state_dir, lambda: self.config)
+        self.lasting = Lasting.new(self.events, self._open_session, self.queue)
         self.lock = StateDirLock(self._state_dir)
         self._stopping = asyncio.Event()
         self._stop_reason = ""
@@ -401,9 +405,19 @@ class Daemon:
     def _status(self, game: Game) -> str:
         """STATUS=: the stage, Kaspar confused (and what reopen would do), the problems."""
         confused = recovery_words(game.session_state, game.settings)
+        waiting = None
+        stopped = game.stopped_waiting
+        if game.stage == "idle" and game.session is None and stopped is not None:
+            waiting = (
+                f"waiting: 'next' reopens group {stopped.plan.group}, session "
+                f"{stopped.plan.number} (stopped), 'stop' closes it"
+            )
+        elif game.stage == "idle" and game.session is None:
+            with contextlib.suppress(Exception):  # the words must never stop the robot
+                waiting = self.queue.words()
         notices = " | ".join(n for n in (self._notice, self._batteries) if n) or None
         battery = battery_words(self.hw.servos.battery() if self.hw is not None else None)
-        return status_line(game.stage, game.problems, notices, confused, battery)
+        return status_line(game.stage, game.problems, notices, confused, battery, waiting)
 
     def _on_game_event(self, event: GameEvent, info: dict[str, Any]) -> None:
         game = self.game
@@ -479,23 +493,14 @@ class Daemon:
         return opened
 
     def _next_plan(self) -> SessionPlan:
-        """The first planned session (group and number) not yet ended; then the last again.
+        """The researcher's choice, else the first planned session (group and number) not
+        yet ended and not absent; then the last again (kasparctl.game.opening.PlanQueue).
 
         A session ends finished, or stopped (the researcher then reopens it with "next",
         or closes it with "stop": a stopped session waits for that choice, see
-        _stopped_waiting). Sessions recorded before plans were numbered are number 1.
-        An abandoned session did not end: it is played again.
+        _stopped_waiting).
         """
-        plans = self.config.sessions
-        if not plans:
-            return SessionPlan(group="unplanned")
-        done: set[tuple[str, int]] = set()
-        for directory in session_dirs(self.state_dir):
-            if is_finished(directory) and abandoned_reason(directory) is None:
-                with contextlib.suppress(OSError, *UNDECODABLE, KeyError, TypeError, ValueError):
-                    meta = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
-                    done.add((meta["group"], int(meta.get("number", 1))))
-        return next((p for p in plans if (p.group, p.number) not in done), plans[-1])
+        return self.queue.take(lambda: asyncio.get_running_loop().time())
 
     def _stopped_waiting(self) -> OpenedSession | None:
         """The latest session, if the researcher stopped it and has not closed it yet.
@@ -503,7 +508,8 @@ class Daemon:
         StorageFailed when it cannot be read; a stopped session that cannot be reopened
         (its records damaged since, its learner gone) stays closed, with a warning.
         """
-        directories = list(session_dirs(self.state_dir))
+        # A group marked absent was never opened: it is no session waiting.
+        directories = [d for d in session_dirs(self.state_dir) if not is_absence(d)]
         if not directories:
             return None
         latest = directories[-1]

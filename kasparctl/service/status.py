@@ -56,11 +56,13 @@ def status_line(
     notice: str | None = None,
     confused: str | None = None,
     battery: str | None = None,
+    waiting: str | None = None,
 ) -> str:
     """The STATUS= text for `stage` with `problems` (part -> why), each reason cut to a limit,
-    and a `notice` (a session abandoned); `confused` (recovery_words) after the stage, and
-    `battery` (battery_words) at the end."""
-    words = STATUS_WORDS.get(stage, stage)
+    and a `notice` (a session abandoned); `confused` (recovery_words) after the stage;
+    `battery` (battery_words) at the end; `waiting`, in idle, what "next" would start
+    (kasparctl.game.opening.PlanQueue.words)."""
+    words = waiting if stage == "idle" and waiting else STATUS_WORDS.get(stage, stage)
     if confused:
         words = f"{words} | {confused}"
     parts = [

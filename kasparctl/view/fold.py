@@ -85,7 +85,15 @@ def daemon_events(lines: Sequence[Mapping[str, Any]]) -> tuple[DaemonEvent, ...]
         fault = "fault" in name or "fault" in kind
         if fault and _text(plain, "fault"):
             name = _text(plain, "fault")
-        events.append(DaemonEvent(_text(plain, "time"), name, detail, fault))
+        chosen = ""
+        if kind == "command" and plain.get("applied") and _text(plain, "group"):
+            # The researcher's choice in idle (kasparctl.game.opening.PlanQueue).
+            name = _text(plain, "confirm", "command")
+            chosen = f"group {_text(plain, 'group')}, session {_text(plain, 'number') or '1'}"
+            if name == "absent":
+                chosen += ", marked absent"
+            detail = detail or chosen
+        events.append(DaemonEvent(_text(plain, "time"), name, detail, fault, chosen))
     return tuple(events)
 
 

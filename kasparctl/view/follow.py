@@ -26,6 +26,7 @@ import msgspec
 
 from kasparctl.game.jsonl import read_json_lines, read_records
 from kasparctl.game.lock import lock_holder
+from kasparctl.game.opening import is_absence
 from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
 from kasparctl.view.fold import SessionFold, daemon_events
 from kasparctl.view.inotify import (
@@ -194,7 +195,10 @@ class Follower:
         new = [path for path in sessions if path not in self._known]
         self._known = set(sessions)
         if self.current not in self._known or (new and self.current is not None):
-            self.current = self._newest(new or sessions)
+            # A group marked absent is no session to follow (kasparctl.game.opening).
+            opened = [path for path in new or sessions if not is_absence(path)]
+            if opened or self.current not in self._known:
+                self.current = self._newest(opened or [p for p in sessions if not is_absence(p)])
         self._session_stale = self._daemon_stale = True
 
     def _watch(self, path: Path, mask: int) -> bool:

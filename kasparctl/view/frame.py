@@ -179,7 +179,8 @@ def _header(view: WatchView, now: dt.datetime, width: int, glyphs: Glyphs) -> li
             second.add("The state directory does not exist yet: waiting for it.", "warn")
         else:
             second.add(f"No session yet ({view.sessions} in the directory): waiting for one.")
-        return [first.line(), second.line(), _daemon_row(view, None, now, width).line()]
+        lines = [first.line(), second.line(), _daemon_row(view, None, now, width).line()]
+        return lines + _chosen_rows(view, width)
     badge = _badge(session.stage)
     first.add(f"{session.group or '?'}", "title").add(
         f"  {session.condition}  {session.variant}  {session.session}", "dim"
@@ -209,7 +210,16 @@ def _header(view: WatchView, now: dt.datetime, width: int, glyphs: Glyphs) -> li
         lines.append(_Row(width).add("CONFUSED ", "warn").add(session.confused).line())
     for alert in session.alerts[-2:]:
         lines.append(_Row(width).add("ALERT ", "warn").add(alert).line())
-    return lines
+    return lines + _chosen_rows(view, width)
+
+
+def _chosen_rows(view: WatchView, width: int) -> list[Line]:
+    """The session the researcher chose in idle (the children hear nothing of it)."""
+    chosen = view.chosen
+    if chosen is None:
+        return []
+    words = chosen if chosen.endswith("marked absent") else f"{chosen}: 'next' starts it"
+    return [_Row(width).add("CHOSEN ", "title").add(words).line()]
 
 
 def _targets(session: SessionView) -> int | None:

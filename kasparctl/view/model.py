@@ -206,6 +206,9 @@ class DaemonEvent:
     name: str
     detail: str
     fault: bool
+    # The researcher chose a planned session in idle, or marked its group absent:
+    # "group B2, session 1" (and ", marked absent").
+    chosen: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -222,3 +225,18 @@ class WatchView:
     footer: str = ""
     # Why part of the state directory cannot be followed (permission denied...), if so.
     problem: str = ""
+
+    @property
+    def chosen(self) -> str | None:
+        """The planned session the researcher chose last in idle, while no session is open
+        since (the daemon's events after the live session's last record)."""
+        choices = [event for event in self.daemon if event.chosen]
+        if not choices:
+            return None
+        last = choices[-1]
+        session = self.session
+        if session is not None and not session.ended:
+            return None
+        if session is not None and session.last_time and last.time <= session.last_time:
+            return None
+        return last.chosen
