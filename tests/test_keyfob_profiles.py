@@ -248,7 +248,7 @@ def test_a_profile_that_does_not_exist_names_the_choices():
         ('title = "x"\n[buttons]\na = ["KEY_A"]\n[commands]\n"hold a" = "next"',
          "commands.hold a: expected 'press', 'long' or 'double'"),
         ('title = "x"\n[buttons]\na = ["KEY_A"]\n[commands]\n"press a" = "dance"',
-         "commands.press a: expected one of next, pause, undo, stop, reopen, found 'dance'"),
+         "commands.press a: expected one of next, pause, undo, stop, reopen, away, choose, absent, found 'dance'"),
         ('title = "x"\n[buttons]\na = ["KEY_A"]\nb = ["KEY_B"]\nc = ["KEY_C"]\n[commands]\n'
          '"long a" = "next"\n"long b" = "stop"\n"long c" = "undo"',
          "commands: expected holds and double presses on at most two buttons"),

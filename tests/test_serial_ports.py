@@ -181,5 +181,5 @@ def test_the_serial_rules_are_udev_syntax_and_name_kaspar_3s_ports():
 
 def test_install_sh_installs_the_serial_rules():
     script = (REPO / "systemd/install.sh").read_text()
-    assert "RULES=(99-kaspar-serial.rules 99-kaspar-keyfob.rules)" in script
+    assert "RULES=(99-kaspar-serial.rules 99-kaspar-keyfob.rules 99-kaspar-researcher.rules)" in script
     assert 'run install -D -m 0644 "$HERE/$rule" "$RULES_DIR/$rule"' in script

@@ -59,6 +59,7 @@ from kasparctl.sim.children import MAX_RESUMES, ChildPress, Hands, SimulatedGrou
 from kasparctl.sim.recording import MotionRecord, recorded_voice
 from kasparctl.sim.simulate import draw_answer_key
 from kasparctl.sim.teacher import DEFAULT_THINK_S, Messiness, Teacher
+from kasparctl.vocabulary import Command
 
 # Kaspar's speech per trial is counted at this rate (words a minute), as the speech
 # budget was measured before the interaction was reworked.
@@ -334,7 +335,9 @@ def assemble(
 
     researcher = None
     if config.researcher.source == "device":
-        researcher = SimKeyfob(clock, commands=config.researcher.command_names())
+        # The simulated researcher holds a device with a key for every command (the
+        # configured presenter may lack choose, absent and away: a keypad has them).
+        researcher = SimKeyfob(clock, commands=sorted(Command))
     # A keypad's command keys are keys of the children's keypad.
     keypad = (
         sorted(set(config.keyfob.commands.values()))
