@@ -93,6 +93,7 @@ from kasparctl.game.researcher import SILENT, SPOKEN_FIRST, TRIGGERS, Facts, con
 from kasparctl.game.routing import (
     ChildGesture,
     ChildPress,
+    HeldPress,
     ResearcherCommand,
     Routed,
     Router,
@@ -398,6 +399,8 @@ class Game:
             self._child_press(routed.button, routed.at)
         elif isinstance(routed, ChildGesture):
             self._child_gesture(routed)
+        elif isinstance(routed, HeldPress):
+            self._record(self.presses.held(routed.button, routed.at, routed.name, self.stage))
         elif isinstance(routed, ResearcherCommand):
             await self._on_command(routed)
         else:

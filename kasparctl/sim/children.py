@@ -6,10 +6,15 @@ step waiting for the researcher) and answer like the simulator's teachers
 or not answer at all; a child who did not answer answers after a prompt. They
 may press messily (Messiness: holds, double taps, both buttons, early presses),
 and every press they make is kept (`presses`) so a run can check that each
-answer was taken and that no press of theirs became a researcher's command.
+answer was taken and that no press of theirs became a researcher's command. A
+press Kaspar did not take (a hold as long as a researcher's command, on one
+keyfob) is pressed again, quickly, when Kaspar asks again.
 The researcher gives commands through `command` (their own device, or holds on
-the children's keyfob). They act only through the simulated hardware, as real
-children would, so the game under test is the game on the robot.
+the children's keyfob), and may interrupt at any moment, open questions included
+(Interruptions: a pause and later the resume, an undo, a stop); a hold on one
+keyfob that Kaspar did not take (begun during a question) is given again a
+moment later. They act only through the simulated hardware, as real children
+would, so the game under test is the game on the robot.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from hal.keyfob.sim import CHORD_LAG, PRESS_GAP, PRESS_HOLD, SimKeyfob
+from kasparctl.game.stages import ENDS, PAUSABLE
 from hal.servos.settings import ServoSettings
 from kasparctl.game.events import GameEvent
 from kasparctl.game.records import FaultSource
@@ -32,6 +38,14 @@ Say = Callable[[str], None]
 # The researcher's command ("next", "pause", "undo", "stop", "reopen"), however they give them.
 Command = Callable[[str], Awaitable[None]]
 MAX_RESUMES = 3
+# An interruption comes this long after Kaspar starts asking (or after an answer, for an
+# undo): across the question, the listening and the feedback (s).
+INTERRUPT_WITHIN_S = (0.0, 12.0)
+# A paused game is resumed after this long (s).
+PAUSED_FOR_S = (2.0, 8.0)
+# A researcher's hold Kaspar did not take is given again this much later, this often.
+RETRY_AFTER_S = 1.0
+RETRIES = 8
 # Where a child shows a bag is where the bag is, give or take this much (degrees).
 SHOW_NOISE_DEG = 3.0
 
@@ -71,6 +85,40 @@ class ChildPress:
     early: bool
 
 
+@dataclass(frozen=True, slots=True)
+class ResearcherAction:
+    """One command the researcher gave: `downs` when its keys went down, `up` when it was
+    done; `on_keyfob` when given on the children's keyfob (or keypad)."""
+
+    command: str
+    downs: tuple[float, ...]
+    up: float
+    on_keyfob: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Interruptions:
+    """How often the researcher interrupts: per question or request, a pause (resumed
+    PAUSED_FOR_S later) or a stop; per answer, an undo. Each comes INTERRUPT_WITHIN_S
+    after it began: during the question, the listening or the feedback."""
+
+    p_pause: float = 0.0
+    p_undo: float = 0.0
+    p_stop: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Refuse a probability outside [0, 1], naming it."""
+        for name in ("p_pause", "p_undo", "p_stop"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"{name}: expected a probability in [0, 1], found {value!r}")
+
+    @property
+    def none(self) -> bool:
+        """The researcher never interrupts (nothing is drawn)."""
+        return not (self.p_pause or self.p_undo or self.p_stop)
+
+
 class SimulatedGroup:
     """A listener for Game.listeners that plays the children and the researcher."""
 
@@ -90,6 +138,8 @@ class SimulatedGroup:
         researcher_s: float = 1.5,
         narrate: Say | None = None,
         patience: int = MAX_RESUMES,
+        interruptions: Interruptions | None = None,
+        researcher_rng: np.random.Generator | None = None,
     ) -> None:
         """Children who press `keyfob` and move `servos`, believing `answers` (a toy per
         target); their researcher gives commands with `command`. Where the bags are is
@@ -121,16 +171,35 @@ class SimulatedGroup:
         self._faults = 0
         self._state = "idle"
         self._resuming = False
+        self.interruptions = interruptions or Interruptions()
+        self._researcher_rng = researcher_rng or np.random.default_rng(0)
+        # How many times Kaspar has started asking, and the last answer pressed since
+        # (the count then, the press's question or bag, the button): not yet taken.
+        self._asked = 0
+        self._unheard: tuple[int, int | None, int | None, str] | None = None
+        self._interrupting = False
 
     def __call__(self, event: GameEvent, info: dict[str, Any]) -> None:
         """Hear a game event and act on it, as the children or the researcher would."""
         if event is GameEvent.STATE:
             self._state = str(info["state"])
+            self._unheard = None
+        elif event is GameEvent.ANSWERED:
+            self._unheard = None
+            self._maybe_interrupt("undo", self.interruptions.p_undo)
+        elif event is GameEvent.ASKING:
+            self._asked += 1
+            self._maybe_interrupt("pause", self.interruptions.p_pause)
+            self._maybe_interrupt("stop", self.interruptions.p_stop)
+        elif event is GameEvent.PROMPT:
+            self._press_again()
         if event is GameEvent.WAITING_FOR_RESEARCHER:
             self._spawn(self._researcher_next())
         elif event is GameEvent.ASKING:
             if "trial" in info:
                 self._asking = (int(info["trial"]), int(info["target"]), int(info["choice"]))
+                # Asked again (after an undo or a re-open): it is open again.
+                self._answered.discard(int(info["trial"]))
                 if self._silent_question != self._asking:
                     self._silent_question = None
             self._spawn(self._eager(info))
@@ -174,12 +243,71 @@ class SimulatedGroup:
         start = await self.keyfob.perform(action)
         if who == "the researcher":
             return
+        if trial is not None or bag is not None:
+            self._unheard = (self._asked, trial, bag, button)
         self.presses.append(
             ChildPress(
-                trial, bag, button, action, _downs(action, start),
+                trial, bag, button, action, gesture_downs(action, start),
                 asyncio.get_running_loop().time(), early,
             )
         )
+
+    def _press_again(self) -> None:
+        """Kaspar asks again after an answer was pressed for this question: it was not
+        taken (held too long on one keyfob); the child presses again, quickly."""
+        unheard = self._unheard
+        if unheard is None or unheard[0] != self._asked or self._silent_question is not None:
+            return
+        _, trial, bag, button = unheard
+        self._unheard = None
+        self._spawn(self._again(trial, bag, button))
+
+    async def _again(self, trial: int | None, bag: int | None, button: str) -> None:
+        await asyncio.sleep(0.5)
+        async with self._keyfob_free:
+            if trial is not None and trial in self._answered:
+                return
+            await self._press(button, "a child, again", trial=trial, bag=bag, button=button)
+
+    def _maybe_interrupt(self, command: str, chance: float) -> None:
+        """Draw whether the researcher gives `command` soon (nothing drawn at chance 0)."""
+        if chance == 0.0 or self._interrupting:
+            return
+        when, draw = (float(value) for value in self._researcher_rng.random(2))
+        if draw >= chance:
+            return
+        low, high = INTERRUPT_WITHIN_S
+        self._interrupting = True
+        self._spawn(self._interrupt(command, low + when * (high - low)))
+
+    async def _interrupt(self, command: str, after: float) -> None:
+        try:
+            await asyncio.sleep(after)
+            if self._state not in PAUSABLE:
+                return
+            if await self._until_taken(command) and command == "pause":
+                low, high = PAUSED_FOR_S
+                await asyncio.sleep(float(self._researcher_rng.uniform(low, high)))
+                if self._state == "paused":
+                    await self._until_taken("pause", resume=True)
+        finally:
+            self._interrupting = False
+
+    async def _until_taken(self, command: str, resume: bool = False) -> bool:
+        """Give `command` until the game shows it was taken (a hold on one keyfob begun
+        during a question is not); False if it is not taken after RETRIES tries."""
+        for _ in range(RETRIES):
+            self.narrate(f"the researcher gives {command.upper()}")
+            await self.command(command)
+            await asyncio.sleep(RETRY_AFTER_S)
+            if command == "undo":
+                return True  # an undo shows in the records only: given once
+            paused = self._state == "paused"
+            if self._state in ENDS or (paused != resume):
+                return True
+            if self._state not in PAUSABLE:
+                return False  # the step it was meant for is over
+        return False
 
     async def _researcher_next(self) -> None:
         await asyncio.sleep(self.researcher_s)
@@ -265,7 +393,7 @@ class SimulatedGroup:
         await self._press(action, "another child", bag=bag, button="green")
 
 
-def _downs(action: str, start: float) -> tuple[float, ...]:
+def gesture_downs(action: str, start: float) -> tuple[float, ...]:
     """When the keys of a keyfob action went down, performed from `start`."""
     words = action.split()
     if words[0] == "double":
