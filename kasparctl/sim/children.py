@@ -20,6 +20,7 @@ would, so the game under test is the game on the robot.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -43,9 +44,11 @@ MAX_RESUMES = 3
 INTERRUPT_WITHIN_S = (0.0, 12.0)
 # A paused game is resumed after this long (s).
 PAUSED_FOR_S = (2.0, 8.0)
-# A researcher's hold Kaspar did not take is given again this much later, this often.
-RETRY_AFTER_S = 1.0
+# A researcher's hold Kaspar did not take is given again, this often, this long after
+# the children's next answer (past the game's 1 s for extras), or after WINDOW_WAIT_S.
+RETRY_AFTER_S = 1.2
 RETRIES = 8
+WINDOW_WAIT_S = 60.0
 # Where a child shows a bag is where the bag is, give or take this much (degrees).
 SHOW_NOISE_DEG = 3.0
 
@@ -178,20 +181,27 @@ class SimulatedGroup:
         self._asked = 0
         self._unheard: tuple[int, int | None, int | None, str] | None = None
         self._interrupting = False
+        # Set when a hold on one keyfob could be a command again: an answer was taken (the
+        # children are asked nothing for a moment), Kaspar asked for a grown-up, a step.
+        self._window = asyncio.Event()
 
     def __call__(self, event: GameEvent, info: dict[str, Any]) -> None:
         """Hear a game event and act on it, as the children or the researcher would."""
         if event is GameEvent.STATE:
             self._state = str(info["state"])
             self._unheard = None
+            self._window.set()
         elif event is GameEvent.ANSWERED:
             self._unheard = None
+            self._window.set()
             self._maybe_interrupt("undo", self.interruptions.p_undo)
         elif event is GameEvent.ASKING:
             self._asked += 1
             self._maybe_interrupt("pause", self.interruptions.p_pause)
             self._maybe_interrupt("stop", self.interruptions.p_stop)
         elif event is GameEvent.PROMPT:
+            if info.get("line") == "prompt.ask_researcher":
+                self._window.set()
             self._press_again()
         if event is GameEvent.WAITING_FOR_RESEARCHER:
             self._spawn(self._researcher_next())
@@ -265,7 +275,7 @@ class SimulatedGroup:
     async def _again(self, trial: int | None, bag: int | None, button: str) -> None:
         await asyncio.sleep(0.5)
         async with self._keyfob_free:
-            if trial is not None and trial in self._answered:
+            if (trial is not None and trial in self._answered) or self._state == "paused":
                 return
             await self._press(button, "a child, again", trial=trial, bag=bag, button=button)
 
@@ -296,7 +306,15 @@ class SimulatedGroup:
     async def _until_taken(self, command: str, resume: bool = False) -> bool:
         """Give `command` until the game shows it was taken (a hold on one keyfob begun
         during a question is not); False if it is not taken after RETRIES tries."""
-        for _ in range(RETRIES):
+        for attempt in range(RETRIES):
+            if attempt:
+                # Not taken: a hold begun during a question. Again once Kaspar has its
+                # answer (and the moment for extras is over), or asks for a grown-up.
+                self._window.clear()
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(WINDOW_WAIT_S):
+                        await self._window.wait()
+                await asyncio.sleep(RETRY_AFTER_S)
             self.narrate(f"the researcher gives {command.upper()}")
             await self.command(command)
             await asyncio.sleep(RETRY_AFTER_S)
@@ -353,7 +371,7 @@ class SimulatedGroup:
         meant = "green" if choice == self.answers[target] else "red"
         action = self.messiness.action(meant, self.rng)
         async with self._keyfob_free:
-            if trial not in self._answered and self._asking == (trial, target, choice):
+            if self._open(trial, target, choice):
                 await self._press(action, "an eager child", trial=trial, button=meant, early=True)
 
     async def _answer(self, trial: int, target: int, choice: int, honest_now: bool = False) -> None:
@@ -367,10 +385,17 @@ class SimulatedGroup:
         action = self.messiness.action(button, self.rng)
         async with self._keyfob_free:
             # An eager press may have answered it, or it was abandoned and asked anew.
-            if trial not in self._answered and self._asking == (trial, target, choice):
+            if self._open(trial, target, choice):
                 await self._press(action, "a child", trial=trial, button=button)
 
+    def _open(self, trial: int, target: int, choice: int) -> bool:
+        """The question is still asked: not answered, not abandoned, and Kaspar not paused
+        (it said it would wait: the children wait too)."""
+        current = self._asking == (trial, target, choice)
+        return current and trial not in self._answered and self._state != "paused"
+
     async def _teach(self, bag: int) -> None:
+        asked = self._asked
         await self._think()
         # Each bag in its own place in the room, within what the arm can safely reach;
         # each child shows it a little differently.
@@ -390,6 +415,8 @@ class SimulatedGroup:
         self.narrate(f"a child moves Kaspar's arm towards bag {bag + 1}")
         await asyncio.sleep(0.5)
         action = self.messiness.action("green", self.rng)
+        if self._state == "paused" or self._asked != asked:
+            return  # Kaspar waits (the request is asked again once resumed)
         await self._press(action, "another child", bag=bag, button="green")
 
 

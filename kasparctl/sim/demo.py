@@ -31,7 +31,7 @@ import numpy as np
 from hal import Hardware
 from hal.clock import LoopClock
 from hal.errors import KasparError
-from hal.keyfob.sim import COMMAND_GESTURES, SimKeyfob, TerminalKeyfob
+from hal.keyfob.sim import SimKeyfob, TerminalKeyfob
 from hal.servos.api import ServoApi
 from hal.servos.sim import SimServos
 from hal.voice.api import VoiceOutput
@@ -448,9 +448,11 @@ async def researcher_command(
         where, action = keyfob, f"command {name}"  # a command key of the children's keypad
     else:
         gestures = {command: gesture for gesture, command in config.game.commands.items()}
-        gesture = gestures.get(name, COMMAND_GESTURES.get(name))
+        gesture = gestures.get(name)
         if gesture is None:
-            return  # no gesture means it on the children's keyfob (a re-open, by default)
+            # No gesture means it on the children's keyfob (an undo or a re-open, by
+            # default): any other gesture there is the children's (a double red is a red).
+            return
         # Held a little past the researcher's hold, as the keyfob's "long" actions are.
         hold = config.researcher.hold_s + 0.3
         where, action = keyfob, gesture
