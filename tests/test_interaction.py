@@ -16,7 +16,7 @@ from typing import Any
 
 import msgspec
 import pytest
-from rig_events import on_event
+from rig_events import answer_the_check, on_event
 from test_game import assert_trials_whole, config_for, play, records_of, trials_of
 
 from kasparctl.config import Config
@@ -90,6 +90,7 @@ def test_on_one_keyfob_a_long_hold_in_a_question_is_no_answer_and_the_researcher
     async def scenario(rig: DemoRig) -> None:
         assert rig.children is not None
         rig.game.listeners.remove(rig.children)  # the test is the children
+        answer_the_check(rig)
         await rig.command("next")  # green held 3.3 s: the pilot starts
         question = await on_event(rig, "question", lambda info: info["trial"] == 1)
         right = question["choice"] == rig.children.answers[question["target"]]
@@ -128,6 +129,7 @@ def test_the_researchers_device_away_gives_them_the_keyfobs_holds_and_back_takes
     async def scenario(rig: DemoRig) -> None:
         assert rig.researcher is not None and rig.children is not None
         rig.game.listeners.remove(rig.children)  # the test is the children and researcher
+        answer_the_check(rig)
         await rig.command("next")
         await on_event(rig, "waiting_for_researcher", lambda info: info["step"] == "placing")
         await rig.researcher.perform("lost")
@@ -167,6 +169,7 @@ def test_an_early_press_is_acknowledged_once_and_a_press_in_the_last_words_answe
     async def scenario(rig: DemoRig) -> None:
         assert rig.children is not None
         rig.game.listeners.remove(rig.children)
+        answer_the_check(rig)
         await rig.command("next")
         await on_event(rig, "asking", lambda info: info["trial"] == 1)
         await asyncio.sleep(0.3)  # Kaspar says how sure it is: too early, twice
@@ -228,6 +231,7 @@ def test_every_step_waits_with_prompts_then_asks_the_researcher(tmp_path: Path) 
     async def scenario(rig: DemoRig) -> None:
         assert rig.children is not None
         rig.game.listeners.remove(rig.children)  # nobody does anything
+        answer_the_check(rig)
         await rig.command("next")
         await on_event(rig, "prompt", lambda info: info["line"] == "steps.ready")
         await rig.command("next")  # step 2: nobody presses

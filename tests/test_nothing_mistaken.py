@@ -16,7 +16,7 @@ from typing import Any
 import msgspec
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from rig_events import on_event
+from rig_events import answer_the_check, on_event
 from test_game import config_for, play, records_of, trials_of
 from test_interaction import with_researcher
 
@@ -36,6 +36,7 @@ def test_on_one_keyfob_a_pause_held_during_an_open_question_is_not_the_answer(
     async def scenario(rig: DemoRig) -> None:
         assert rig.children is not None
         rig.game.listeners.remove(rig.children)  # the test is the children and the researcher
+        answer_the_check(rig)
         await rig.command("next")
         question = await on_event(rig, "question", lambda info: info["trial"] == 1)
         right = question["choice"] == rig.children.answers[question["target"]]

@@ -42,6 +42,7 @@ and the records (records); the Game listens, decides and starts the steps.
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -74,6 +75,7 @@ from kasparctl.game.guess import LISTENING_SOUND
 from kasparctl.game.inputs import FromResearcher, GameInput, Inputs, StepEnded, describe
 from kasparctl.game.opening import OpenedSession, session_script
 from kasparctl.game.phrases import PhrasePicker
+from kasparctl.game.buttons import ButtonCheck
 from kasparctl.game.presses import ChildPresses
 from kasparctl.game.recorder import Recorder, loop_time
 from kasparctl.game.records import (
@@ -237,6 +239,11 @@ class Game:
         self._inputs = Inputs()
         self._step_task: asyncio.Task[None] | None = None
         self.presses = ChildPresses(self.settings.extra_press_gap_s)
+        self.buttons = ButtonCheck()
+        # When the children's keyfob last sent a key, and whether Kaspar has said it
+        # seems silent (a flat battery) in this game.
+        self._keyfob_heard_at = -math.inf
+        self._said_keyfob_silent = False
         self.router = Router(config.researcher, self.settings.commands, self.hw.researcher)
         self.listeners: list[Listener] = []
         self.script = script(config.game.script)
@@ -294,6 +301,7 @@ class Game:
             reopen_available=(
                 state is not None and recovery.reopen_record(state, self.settings) is not None
             ),
+            checking_buttons=self.buttons.running,
         )
 
     # -- the run loop -----------------------------------------------------------
@@ -370,6 +378,7 @@ class Game:
         if isinstance(event, FromResearcher):
             await self._on_researcher_input(event.event)
         elif isinstance(event, Gesture):
+            self._heard_keyfob(event.at)
             await self._act(self.router.from_keyfob(event, self.presses.asking_at))
         elif isinstance(event, StepEnded):
             await self._on_step_ended(event)
@@ -507,6 +516,9 @@ class Game:
                 raise outcome
 
     async def _fire(self, key: Confirmation) -> None:
+        if key is Confirmation.SKIP_CHECK:
+            self.buttons.skip()
+            return
         if key is Confirmation.UNDO:
             await self._undo()
             return
@@ -698,6 +710,8 @@ class Game:
             recorder=self.recorder,
             emit=self._emit,
             showing=self._showing,
+            buttons=self.buttons,
+            unanswered=self._unanswered,
         )
 
     async def _cancel_step(self) -> None:
@@ -789,6 +803,34 @@ class Game:
         self.problems.set(FaultSource.KEYFOB, None)
         self._emit(GameEvent.KEYFOB_BACK)
         self.speech.announce_soon("fault.keyfob_back")
+
+    def _heard_keyfob(self, at: float) -> None:
+        """A key of the children's keyfob: it is not silent (a suspicion is over)."""
+        self._keyfob_heard_at = max(self._keyfob_heard_at, at)
+        if FaultSource.KEYFOB_SILENT in self.problems:
+            self._record(HalRecord(event=HalEvent.KEYFOB_HEARD))
+            self.problems.set(FaultSource.KEYFOB_SILENT, None)
+
+    def _unanswered(self, since: float) -> None:
+        """A whole prompt cycle passed with no answer to what was asked at `since`: if the
+        children's keyfob sent nothing at all meanwhile while the researcher's own device
+        is there and working, its battery is suspected (recorded, STATUS=, said once)."""
+        device = self.hw.researcher
+        works = self.router.reads_device and device is not None and device.connected
+        if not works or self._keyfob_heard_at >= since:
+            return  # the children pressed something, or nothing tells the keyfob apart
+        if FaultSource.KEYFOB_SILENT in self.problems:
+            return
+        silent = self._now() - since
+        reason = (
+            f"no key from the children's keyfob for {silent:.0f} s of prompts while the "
+            "researcher's device works: its battery may be flat"
+        )
+        self._record(HalRecord(event=HalEvent.KEYFOB_SILENT, reason=reason))
+        self.problems.set(FaultSource.KEYFOB_SILENT, reason)
+        if not self._said_keyfob_silent:
+            self._said_keyfob_silent = True
+            self.speech.announce_soon("fault.keyfob_silent")
 
     def _on_researcher_lost(self, event: KeyfobLost) -> None:
         self._record(HalRecord(event=HalEvent.RESEARCHER_LOST, reason=event.reason))

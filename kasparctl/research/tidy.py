@@ -231,6 +231,7 @@ _EVENT_NAME = {
     "confused": "reason",
     "reopen": "name",
     "alert": "alert",
+    "button_check": "asked",
 }
 
 

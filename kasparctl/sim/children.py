@@ -39,6 +39,8 @@ Say = Callable[[str], None]
 # The researcher's command ("next", "pause", "undo", "stop", "reopen"), however they give them.
 Command = Callable[[str], Awaitable[None]]
 MAX_RESUMES = 3
+# How long a child takes to press the button Kaspar asks for when it checks them (s).
+CHECK_THINK_S = 1.0
 # An interruption comes this long after Kaspar starts asking (or after an answer, for an
 # undo): across the question, the listening and the feedback (s).
 INTERRUPT_WITHIN_S = (0.0, 12.0)
@@ -76,7 +78,8 @@ class ChildPress:
     """One press a child made: for which question (trial) or bag, what they meant, when.
 
     `downs` are the times its keys went down (a double and a squeeze have two) and
-    `up` when the last one came up; `early` when made while Kaspar was still asking.
+    `up` when the last one came up; `early` when made while Kaspar was still asking;
+    `check` when it answered Kaspar's check of the buttons at the session's start.
     """
 
     trial: int | None
@@ -86,6 +89,7 @@ class ChildPress:
     downs: tuple[float, ...]
     up: float
     early: bool
+    check: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -223,6 +227,8 @@ class SimulatedGroup:
             self._spawn(self._answer(trial, target, choice, honest_now=True))
         elif event is GameEvent.TEACH:
             self._spawn(self._teach(int(info["bag"])))
+        elif event is GameEvent.BUTTON_CHECK:
+            self._spawn(self._try_button(str(info["button"])))
         elif event is GameEvent.CONFUSED:
             self._spawn(self._researcher_reopens(info["learned"]))
         elif _calls_researcher(event, info) and not self._resuming:
@@ -247,7 +253,7 @@ class SimulatedGroup:
 
     async def _press(
         self, action: str, who: str, *, trial: int | None = None, bag: int | None = None,
-        button: str = "", early: bool = False,
+        button: str = "", early: bool = False, check: bool = False,
     ) -> None:  # fmt: skip
         self.narrate(f"{who} presses {action.upper()}")
         start = await self.keyfob.perform(action)
@@ -258,7 +264,7 @@ class SimulatedGroup:
         self.presses.append(
             ChildPress(
                 trial, bag, button, action, gesture_downs(action, start),
-                asyncio.get_running_loop().time(), early,
+                asyncio.get_running_loop().time(), early, check,
             )
         )
 
@@ -387,6 +393,14 @@ class SimulatedGroup:
             # An eager press may have answered it, or it was abandoned and asked anew.
             if self._open(trial, target, choice):
                 await self._press(action, "a child", trial=trial, button=button)
+
+    async def _try_button(self, button: str) -> None:
+        """Kaspar checks the buttons: a child presses the one asked for, cleanly (no draw
+        from the children's stream: the game after it is the game it was before)."""
+        await asyncio.sleep(CHECK_THINK_S)
+        async with self._keyfob_free:
+            if self._state != "paused":
+                await self._press(button, "a child", button=button, check=True)
 
     def _open(self, trial: int, target: int, choice: int) -> bool:
         """The question is still asked: not answered, not abandoned, and Kaspar not paused

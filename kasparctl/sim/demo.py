@@ -46,6 +46,7 @@ from kasparctl.game.opening import OpenedSession, open_new
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.records import (
     AnyRecord,
+    ButtonCheckRecord,
     CommandRecord,
     FaultSource,
     PoseRecord,
@@ -539,6 +540,13 @@ def lost_answers(
         f"bag {p.bag + 1} at {p.downs[0]:.3f}"
         for p in presses
         if p.bag is not None and not shown.intersection(p.downs)
+    ]
+    # Each press for Kaspar's check of the buttons is the press its record names.
+    checked = {(r.pressed, r.at) for r in records if isinstance(r, ButtonCheckRecord)}
+    lost += [
+        f"the check's {p.button} at {p.downs[0]:.3f}"
+        for p in presses
+        if p.check and (p.button, p.downs[0]) not in checked
     ]
     by_trial: dict[int, list[ChildPress]] = {}
     for press in presses:
