@@ -60,6 +60,7 @@ from kasparctl.body.api import Body, GazeKind
 from kasparctl.config import Config, SessionPlan
 from kasparctl.game import recovery
 from kasparctl.game.bodywork import GREETING, BodyWork
+from kasparctl.game.buttons import ButtonCheck
 from kasparctl.game.context import StepContext
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.faults import (
@@ -75,7 +76,6 @@ from kasparctl.game.guess import LISTENING_SOUND
 from kasparctl.game.inputs import FromResearcher, GameInput, Inputs, StepEnded, describe
 from kasparctl.game.opening import OpenedSession, session_script
 from kasparctl.game.phrases import PhrasePicker
-from kasparctl.game.buttons import ButtonCheck
 from kasparctl.game.presses import ChildPresses
 from kasparctl.game.recorder import Recorder, loop_time
 from kasparctl.game.records import (

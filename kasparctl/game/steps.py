@@ -21,9 +21,9 @@ from msgspec import UNSET
 from kasparctl.game.bodywork import FAREWELL, GREETING
 from kasparctl.game.buttons import ASKED, pressed, skipped
 from kasparctl.game.context import StepContext
-from kasparctl.game.presses import Press
 from kasparctl.game.events import GameEvent
 from kasparctl.game.guess import Guess
+from kasparctl.game.presses import Press
 from kasparctl.game.records import PoseRecord, PressRecord, PromptRecord
 from kasparctl.game.state import GameState, far_from
 
@@ -140,7 +140,10 @@ class Steps:
                 await ctx.speech.say(f"buttons.{asked}")
                 ctx.presses.asked(ctx.now())
                 ctx.emit(GameEvent.BUTTON_CHECK, button=asked)
-                prompts = ((f"buttons.{asked}", {}), ("prompt.ask_researcher", {}))
+                prompts: tuple[tuple[str, dict[str, str]], ...] = (
+                    (f"buttons.{asked}", {}),
+                    ("prompt.ask_researcher", {}),
+                )
                 answer = asyncio.ensure_future(ctx.wait_with_prompts(opened, prompts))
                 await asyncio.wait({answer, skip}, return_when=asyncio.FIRST_COMPLETED)
                 if not answer.done():

@@ -28,11 +28,11 @@ from typing import Any, Protocol
 import numpy as np
 
 from hal.keyfob.sim import CHORD_LAG, PRESS_GAP, PRESS_HOLD, SimKeyfob
-from kasparctl.game.stages import ENDS, PAUSABLE
 from hal.servos.settings import ServoSettings
 from kasparctl.game.events import GameEvent
 from kasparctl.game.records import FaultSource
 from kasparctl.game.recovery import to_reopen
+from kasparctl.game.stages import ENDS, PAUSABLE
 from kasparctl.sim.teacher import Messiness, Teacher
 
 Say = Callable[[str], None]
