@@ -116,7 +116,8 @@ class RecordedNotifier(Notifier):
 
 
 class Children:
-    """Honest children: they answer each question with the answer key, and teach each bag."""
+    """Honest children: they answer each question with the answer key, teach each bag, and
+    press the button Kaspar asks for when it checks them."""
 
     def __init__(self, keyfob: SimKeyfob, answers: list[int]) -> None:
         self.keyfob = keyfob
@@ -129,6 +130,8 @@ class Children:
             self._spawn("green" if right else "red")
         elif event is GameEvent.TEACH:
             self._spawn("green")
+        elif event is GameEvent.BUTTON_CHECK:
+            self._spawn(str(info["button"]))  # Kaspar checks the buttons: the one asked for
 
     def _spawn(self, action: str) -> None:
         async def press() -> None:
