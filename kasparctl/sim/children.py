@@ -281,7 +281,7 @@ class SimulatedGroup:
     async def _again(self, trial: int | None, bag: int | None, button: str) -> None:
         await asyncio.sleep(0.5)
         async with self._keyfob_free:
-            if (trial is not None and trial in self._answered) or self._state == "paused":
+            if (trial is not None and trial in self._answered) or self._waiting():
                 return
             await self._press(button, "a child, again", trial=trial, bag=bag, button=button)
 
@@ -399,14 +399,18 @@ class SimulatedGroup:
         from the children's stream: the game after it is the game it was before)."""
         await asyncio.sleep(CHECK_THINK_S)
         async with self._keyfob_free:
-            if self._state != "paused":
+            if not self._waiting():
                 await self._press(button, "a child", button=button, check=True)
 
     def _open(self, trial: int, target: int, choice: int) -> bool:
         """The question is still asked: not answered, not abandoned, and Kaspar not paused
-        (it said it would wait: the children wait too)."""
+        or stopped (it said it would wait, or goodbye: the children stop too)."""
         current = self._asking == (trial, target, choice)
-        return current and trial not in self._answered and self._state != "paused"
+        return current and trial not in self._answered and not self._waiting()
+
+    def _waiting(self) -> bool:
+        """Kaspar said it would wait (paused) or said goodbye (stopped): nobody presses."""
+        return self._state == "paused" or self._state in ENDS
 
     async def _teach(self, bag: int) -> None:
         asked = self._asked
@@ -429,8 +433,8 @@ class SimulatedGroup:
         self.narrate(f"a child moves Kaspar's arm towards bag {bag + 1}")
         await asyncio.sleep(0.5)
         action = self.messiness.action("green", self.rng)
-        if self._state == "paused" or self._asked != asked:
-            return  # Kaspar waits (the request is asked again once resumed)
+        if self._waiting() or self._asked != asked:
+            return  # Kaspar waits (the request is asked again once resumed), or it is over
         await self._press(action, "another child", bag=bag, button="green")
 
 
