@@ -7,9 +7,12 @@ device works is reported as a flat battery, suspected (recorded, STATUS=, said o
 from __future__ import annotations
 
 import asyncio
+import tempfile
 from pathlib import Path
 from typing import Any
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rig_events import on_event
 from test_game import config_for, play, records_of, trials_of
 from test_interaction import first, said, with_researcher
@@ -176,3 +179,41 @@ def test_in_the_pilot_the_checks_prompt_is_no_childs_turn(tmp_path: Path) -> Non
     # As the research walks it: nobody's turn (the first question is child 1's).
     prompts = [w for w in walk(session) if isinstance(w.record, PromptRecord)]
     assert [(w.record.line, w.child_index) for w in prompts] == [("buttons.green", None)]
+
+
+@settings(max_examples=15, deadline=None, derandomize=True)
+@given(after=st.floats(0.0, 18.0), seed=st.integers(0, 1000))
+def test_a_next_at_any_moment_of_the_check_skips_the_check_or_the_step_never_both(
+    after: float, seed: int
+) -> None:
+    seen: dict[str, Any] = {}
+
+    async def scenario(rig: DemoRig) -> None:
+        await on_event(rig, "session")
+        await asyncio.sleep(after)
+        seen["checking"] = not rig.game.buttons.done
+        await rig.command("next")
+        await asyncio.sleep(8.0)  # past the greeting, if it was skipped during it
+        await rig.command("stop")
+
+    with tempfile.TemporaryDirectory(prefix="kaspar-check-") as scratch:
+        result, _, out = play(Path(scratch), seed=seed, scenario=scenario)
+        records = records_of(result)
+    # Step 1 was played either way: Kaspar asked for the bags to be placed.
+    assert first("steps.place_bags").format(bags="6") in said(out)
+    checks = [r for r in records if r["kind"] == "button_check"]
+    confirms = [r.get("confirm") for r in records if r["kind"] == "command"]
+    pressed = [(r["asked"], r.get("pressed")) for r in checks if not r.get("skipped")]
+    assert pressed == [("green", "green"), ("red", "red")][: len(pressed)]
+    if "skip_check" in confirms:
+        # The rest of the check skipped (recorded, unless every button was pressed as
+        # the skip came); the step is moved on only by a "next" of its own.
+        assert len(pressed) == 2 or checks[-1].get("skipped") is True
+        assert confirms.count("skip_check") == 1
+    else:
+        # The check was over: "next" moved on from step 1.
+        assert not seen["checking"] and len(pressed) == 2
+        assert "next_step" in confirms
+    assert not {r.get("at") for r in checks} & {
+        r["feedback_at"] for r in records if r["kind"] == "trial"
+    }

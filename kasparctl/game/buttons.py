@@ -31,21 +31,37 @@ class ButtonCheck:
         """Not checked yet, and not running."""
         self.done = False
         self._skip: asyncio.Event | None = None
+        # Skipped before it began (the researcher's "next" during the greeting).
+        self._skipped_early = False
 
     @property
     def running(self) -> bool:
-        """Kaspar is checking the buttons now: the researcher's "next" skips it."""
+        """Kaspar is checking the buttons now."""
         return self._skip is not None and not self.done
 
+    def due(self, stage: str, variant: str, trials: int) -> bool:
+        """The check is running, or the step now playing begins with it (step 1; the
+        pilot's step 4 before its first trial): the researcher's "next" skips it."""
+        if self.done:
+            return False
+        starting = stage == "placing" or (stage == "guessing" and variant == "pilot" and trials == 0)
+        return self.running or starting
+
     def begin(self) -> asyncio.Event:
-        """The check starts: the event the researcher's skip sets."""
+        """The check starts: the event the researcher's skip sets (set already when they
+        skipped it before it began)."""
         self._skip = asyncio.Event()
+        if self._skipped_early:
+            self._skip.set()
         return self._skip
 
     def skip(self) -> None:
-        """The researcher's "next": the rest of the check is skipped."""
+        """The researcher's "next": the rest of the check is skipped (all of it, if it has
+        not begun: the step that plays it is starting)."""
         if self._skip is not None:
             self._skip.set()
+        else:
+            self._skipped_early = True
 
     def end(self) -> None:
         """The check is over (every button pressed, or skipped): not played again."""
@@ -55,6 +71,7 @@ class ButtonCheck:
     def left(self) -> None:
         """The check was cut off (a pause, a fault, a stop): asked again from the start."""
         self._skip = None
+        self._skipped_early = False
 
 
 def pressed(asked: Button, button: str, at: float) -> ButtonCheckRecord:

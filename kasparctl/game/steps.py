@@ -129,7 +129,8 @@ class Steps:
         skip = asyncio.ensure_future(check.begin().wait())
         answer: asyncio.Future[Press] | None = None
         try:
-            await ctx.speech.say("buttons.start")
+            if not skip.done():
+                await ctx.speech.say("buttons.start")
             for asked in ASKED:
                 if skip.done():
                     ctx.record(skipped(asked))

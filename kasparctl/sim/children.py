@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -33,7 +34,7 @@ from kasparctl.game.events import GameEvent
 from kasparctl.game.records import FaultSource
 from kasparctl.game.recovery import to_reopen
 from kasparctl.game.stages import ENDS, PAUSABLE
-from kasparctl.sim.teacher import Messiness, Teacher
+from kasparctl.sim.teacher import Messiness, Teacher, TeacherError
 
 Say = Callable[[str], None]
 # The researcher's command ("next", "pause", "undo", "stop", "reopen"), however they give them.
@@ -117,8 +118,8 @@ class Interruptions:
         """Refuse a probability outside [0, 1], naming it."""
         for name in ("p_pause", "p_undo", "p_stop"):
             value = getattr(self, name)
-            if not 0.0 <= value <= 1.0:
-                raise ValueError(f"{name}: expected a probability in [0, 1], found {value!r}")
+            if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+                raise TeacherError(f"expected a probability in [0, 1], found {value!r}", name)
 
     @property
     def none(self) -> bool:
