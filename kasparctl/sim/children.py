@@ -80,7 +80,8 @@ class ChildPress:
 
     `downs` are the times its keys went down (a double and a squeeze have two) and
     `up` when the last one came up; `early` when made while Kaspar was still asking;
-    `check` when it answered Kaspar's check of the buttons at the session's start.
+    `check` when it answered Kaspar's check of the buttons at the session's start;
+    `withdrawn` when it went down after Kaspar had paused or stopped.
     """
 
     trial: int | None
@@ -91,6 +92,9 @@ class ChildPress:
     up: float
     early: bool
     check: bool = False
+    # Its key went down after Kaspar had paused or stopped (it waited for the keyfob):
+    # no question was open for it.
+    withdrawn: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -189,11 +193,13 @@ class SimulatedGroup:
         # Set when a hold on one keyfob could be a command again: an answer was taken (the
         # children are asked nothing for a moment), Kaspar asked for a grown-up, a step.
         self._window = asyncio.Event()
+        self._state_since = -math.inf
 
     def __call__(self, event: GameEvent, info: dict[str, Any]) -> None:
         """Hear a game event and act on it, as the children or the researcher would."""
         if event is GameEvent.STATE:
             self._state = str(info["state"])
+            self._state_since = asyncio.get_running_loop().time()
             self._unheard = None
             self._window.set()
         elif event is GameEvent.ANSWERED:
@@ -266,6 +272,7 @@ class SimulatedGroup:
             ChildPress(
                 trial, bag, button, action, gesture_downs(action, start),
                 asyncio.get_running_loop().time(), early, check,
+                withdrawn=self._waiting() and self._state_since <= start,
             )
         )
 

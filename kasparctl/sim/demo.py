@@ -532,6 +532,8 @@ def lost_answers(
     (one keyfob), a hold or squeeze of `held` seconds or more is no answer by the rule
     (the children press again when Kaspar asks again), so it is not counted here.
     """
+    # A press that went down once Kaspar had paused or stopped had no question to answer.
+    presses = [p for p in presses if not p.withdrawn]
     if held is not None:
         presses = [p for p in presses if not _held_for(p.action, held)]
     trials = [r for r in records if isinstance(r, TrialRecord)]
