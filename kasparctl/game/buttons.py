@@ -42,10 +42,10 @@ class ButtonCheck:
     def due(self, stage: str, variant: str, trials: int) -> bool:
         """The check is running, or the step now playing begins with it (step 1; the
         pilot's step 4 before its first trial): the researcher's "next" skips it."""
-        if self.done:
-            return False
-        starting = stage == "placing" or (stage == "guessing" and variant == "pilot" and trials == 0)
-        return self.running or starting
+        if self.done or self._skipped_early:
+            return False  # a second "next" moves on from the step
+        pilot_start = stage == "guessing" and variant == "pilot" and trials == 0
+        return self.running or stage == "placing" or pilot_start
 
     def begin(self) -> asyncio.Event:
         """The check starts: the event the researcher's skip sets (set already when they
