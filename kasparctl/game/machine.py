@@ -244,6 +244,8 @@ class Game:
         # seems silent (a flat battery) in this game.
         self._keyfob_heard_at = -math.inf
         self._said_keyfob_silent = False
+        # The command being applied was the researcher's hold on the children's keyfob.
+        self._command_on_keyfob = False
         self.router = Router(config.researcher, self.settings.commands, self.hw.researcher)
         self.listeners: list[Listener] = []
         self.script = script(config.game.script)
@@ -434,6 +436,13 @@ class Game:
     # -- the researcher's commands ------------------------------------------------
 
     async def _on_command(self, given: ResearcherCommand) -> None:
+        self._command_on_keyfob = given.source == "keyfob"
+        try:
+            await self._command(given)
+        finally:
+            self._command_on_keyfob = False
+
+    async def _command(self, given: ResearcherCommand) -> None:
         stage = self.stage
         key = confirmation(stage, given.command, self._facts())
         command = CommandRecord(
@@ -733,7 +742,9 @@ class Game:
                     "a step carried on after being cancelled; cancelling again",
                     step=task.get_name(),
                 )
-        self.presses.close(self._now())
+        # A question the researcher's own hold on the keyfob cut off gives the children no
+        # grace: the researcher had the keyfob (and may hold it again at once).
+        self.presses.close(self._now(), grace=not self._command_on_keyfob)
 
     async def _on_step_ended(self, event: StepEnded) -> None:
         if event.step != self.stage:

@@ -21,8 +21,8 @@ question to answer and is recorded as such.
 
 One rule more, for a researcher who has only the children's keyfob: a gesture
 that began while the children were being asked (from the start of a question
-to `extra_press_gap_s` after its answer was taken, or after it was abandoned: a
-pause, a fault, a stop) is the children's, whatever
+to `extra_press_gap_s` after its answer was taken, or after it was abandoned by
+anything but the researcher's own command on the keyfob) is the children's, whatever
 it became (a hold of 3 s, both buttons held): `asking_at` says so. Once Kaspar
 has begun to ask for a grown-up's help (`hand_to_researcher`), a hold begun from
 then on is the grown-up's again. A hold that reached the researcher's hold is
@@ -183,15 +183,17 @@ class ChildPresses:
         """The last answer was taken back: a press after it is no extra."""
         self._last_answer_at = None
 
-    def close(self, at: float) -> None:
+    def close(self, at: float, grace: bool = True) -> None:
         """The question is abandoned at `at` (its step was left): nobody waits for its answer.
 
-        A gesture begun within `extra_press_gap_s` after is still the children's (a child
-        mid-press as Kaspar pauses), as after an answer.
+        With `grace`, a gesture begun within `extra_press_gap_s` after is still the
+        children's (a child mid-press as a fault stops the step), as after an answer;
+        without (the researcher's own command on the keyfob left it: they held the
+        keyfob), their next hold is theirs at once.
         """
         if self._answer is not None and not self._answer.done():
             self._answer.cancel()
-            self._end_asking(at + self.extra_press_gap_s)
+            self._end_asking(at + (self.extra_press_gap_s if grace else 0.0))
         self._answer = None
 
     def _end_asking(self, at: float) -> None:

@@ -152,6 +152,7 @@ class SimulatedGroup:
         patience: int = MAX_RESUMES,
         interruptions: Interruptions | None = None,
         researcher_rng: np.random.Generator | None = None,
+        shares_keyfob: Callable[[], bool] = lambda: False,
     ) -> None:
         """Children who press `keyfob` and move `servos`, believing `answers` (a toy per
         target); their researcher gives commands with `command`. Where the bags are is
@@ -184,6 +185,9 @@ class SimulatedGroup:
         self._state = "idle"
         self._resuming = False
         self.interruptions = interruptions or Interruptions()
+        # The researcher's commands are on the children's keyfob (or keypad) now: they
+        # take it in hand, and no child presses it while they hold it.
+        self.shares_keyfob = shares_keyfob
         self._researcher_rng = researcher_rng or np.random.default_rng(0)
         # How many times Kaspar has started asking, and the last answer pressed since
         # (the count then, the press's question or bag, the button): not yet taken.
@@ -330,7 +334,7 @@ class SimulatedGroup:
                         await self._window.wait()
                 await asyncio.sleep(RETRY_AFTER_S)
             self.narrate(f"the researcher gives {command.upper()}")
-            await self.command(command)
+            await self._give(command)
             await asyncio.sleep(RETRY_AFTER_S)
             if command == "undo":
                 return True  # an undo shows in the records only: given once
@@ -341,10 +345,18 @@ class SimulatedGroup:
                 return False  # the step it was meant for is over
         return False
 
+    async def _give(self, command: str) -> None:
+        """The researcher gives `command`, taking the children's keyfob if it carries it."""
+        if not self.shares_keyfob():
+            await self.command(command)
+            return
+        async with self._keyfob_free:
+            await self.command(command)
+
     async def _researcher_next(self) -> None:
         await asyncio.sleep(self.researcher_s)
         self.narrate("the researcher gives NEXT")
-        await self.command("next")
+        await self._give("next")
 
     async def _researcher_resumes(self) -> None:
         # The researcher checks the robot, then resumes (again, if the robot refused);
@@ -356,7 +368,7 @@ class SimulatedGroup:
             self._faults += 1
             command = "stop" if self._faults > self.patience else "pause"
             self.narrate(f"the researcher gives {command.upper()}")
-            await self.command(command)
+            await self._give(command)
         finally:
             self._resuming = False
 
@@ -367,7 +379,7 @@ class SimulatedGroup:
         for _ in range(to_reopen(learned, self.answers)):
             await asyncio.sleep(self.researcher_s)
             self.narrate("the researcher gives REOPEN")
-            await self.command("reopen")
+            await self._give("reopen")
 
     def _reply(self, target: int, choice: int, honest_now: bool) -> bool | None:
         correct = choice == self.answers[target]

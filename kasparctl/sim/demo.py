@@ -416,6 +416,7 @@ def assemble(
             command=give,
             messiness=options.messiness,
             interruptions=options.interruptions,
+            shares_keyfob=lambda: researcher is None or not researcher.connected,
             researcher_rng=np.random.default_rng([options.seed, 5, progress]),
             # The bags stay where they were put, whatever was interrupted.
             room=np.random.default_rng([options.seed, 4]),
