@@ -5,7 +5,8 @@ pilot's first words) Kaspar asks the children to press green, then red, and than
 them. Each press is recorded as a `button_check` record (never a trial, never an
 answer: the learner, the game's state and the research exports count no such
 thing), and the check is played once in a game (a pause or a fault during it asks
-again, from green). The researcher's "next" skips what is left of it. Nobody
+again, from green). The researcher's "next" while it runs skips what is left of
+it (a "next" before it begins moves on from the step, as ever). Nobody
 pressing is met like an unanswered question: a prompt, then Kaspar asks for a
 grown-up (and a keyfob silent through that while the researcher's device works is
 reported as a flat battery, suspected: kasparctl.game.machine).
@@ -31,37 +32,22 @@ class ButtonCheck:
         """Not checked yet, and not running."""
         self.done = False
         self._skip: asyncio.Event | None = None
-        # Skipped before it began (the researcher's "next" during the greeting).
-        self._skipped_early = False
 
     @property
     def running(self) -> bool:
-        """Kaspar is checking the buttons now."""
+        """Kaspar is checking the buttons now: the researcher's "next" skips the check
+        (before it begins, during the greeting, "next" moves on from the step as ever)."""
         return self._skip is not None and not self.done
 
-    def due(self, stage: str, variant: str, trials: int) -> bool:
-        """The check is running, or the step now playing begins with it (step 1; the
-        pilot's step 4 before its first trial): the researcher's "next" skips it."""
-        if self.done or self._skipped_early:
-            return False  # a second "next" moves on from the step
-        pilot_start = stage == "guessing" and variant == "pilot" and trials == 0
-        return self.running or stage == "placing" or pilot_start
-
     def begin(self) -> asyncio.Event:
-        """The check starts: the event the researcher's skip sets (set already when they
-        skipped it before it began)."""
+        """The check starts: the event the researcher's skip sets."""
         self._skip = asyncio.Event()
-        if self._skipped_early:
-            self._skip.set()
         return self._skip
 
     def skip(self) -> None:
-        """The researcher's "next": the rest of the check is skipped (all of it, if it has
-        not begun: the step that plays it is starting)."""
+        """The researcher's "next" while it runs: the rest of the check is skipped."""
         if self._skip is not None:
             self._skip.set()
-        else:
-            self._skipped_early = True
 
     def end(self) -> None:
         """The check is over (every button pressed, or skipped): not played again."""
@@ -71,7 +57,6 @@ class ButtonCheck:
     def left(self) -> None:
         """The check was cut off (a pause, a fault, a stop): asked again from the start."""
         self._skip = None
-        self._skipped_early = False
 
 
 def pressed(asked: Button, button: str, at: float) -> ButtonCheckRecord:

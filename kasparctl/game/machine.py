@@ -303,8 +303,7 @@ class Game:
             reopen_available=(
                 state is not None and recovery.reopen_record(state, self.settings) is not None
             ),
-            checking_buttons=state is not None
-            and self.buttons.due(self.stage, self.settings.variant, state.trials),
+            checking_buttons=self.buttons.running,
         )
 
     # -- the run loop -----------------------------------------------------------
