@@ -1,4 +1,4 @@
-"""Messy children: holds, double taps, both buttons and early presses, never a command.
+"""Messy children and a researcher who interrupts: nothing mistaken for anything else.
 
 Run on demand: .venv/bin/python bench/bench_messy_children.py [--answers N] [--json]
 
@@ -11,13 +11,23 @@ logs a bag is an answer too):
     both buttons, the meant one first (0.15-4 s)                            10 %
     early: pressed while Kaspar is still asking, again once asked if need be 20 %
 
+and a researcher who, besides their next, resumes and re-opens, interrupts at any
+moment, open questions included (kasparctl.sim.children.Interruptions):
+
+    pause, resumed 2-8 s later        15 % of questions and bag requests
+    undo                               5 % of answers
+    stop                               0.5 % of questions (the game ends stopped)
+
 in each place the researcher's commands can come from: their own device (the
 default; the children's keyfob carries answers only), the extra keys of the
 children's keypad, and the children's keyfob alone (the researcher's holds of
-3 s, begun while nobody is asked). Targets, per
-mode: 0 commands started by a child's press, 0 answers not taken as meant, every
-session finished. Also reported: the median time from an answer to the end of
-Kaspar's next question, and Kaspar's speech per trial.
+3 s; one begun during a question is no command and no answer, and is held again a
+moment later). Targets, per mode: 0 commands a child's press started, 0 researcher
+commands taken as the children's answer (both counted from the records against the
+simulated people's own key times), 0 answers not taken as meant, every session
+finished or stopped by the researcher. Also reported: holds on one keyfob that were
+neither (pressed again), the median time from an answer to the end of Kaspar's next
+question, and Kaspar's speech per trial.
 """
 
 from __future__ import annotations
@@ -36,12 +46,16 @@ from typing import Any
 import msgspec
 
 from kasparctl.config import Config
+from kasparctl.game.presses import HELD
+from kasparctl.game.records import PressRecord
 from kasparctl.log import configure_logging
 from kasparctl.sim import simtime
+from kasparctl.sim.children import Interruptions
 from kasparctl.sim.demo import DemoOptions, DemoResult, DemoRig, build, demo_config
 from kasparctl.sim.teacher import Messiness
 
 RATES = Messiness(p_hold=0.20, p_double=0.10, p_both=0.10, p_early=0.20)
+RESEARCHER = Interruptions(p_pause=0.15, p_undo=0.05, p_stop=0.005)
 MODES = ("device", "keypad", "keyfob")
 KEYPAD = {"KEY_F1": "next", "KEY_F2": "pause", "KEY_F3": "undo", "KEY_F4": "stop"}
 
@@ -59,12 +73,16 @@ def config_for(mode: str) -> Config:
 
 
 def one_game(
-    config: Config, seed: int, root: Path, messiness: Messiness
+    config: Config, seed: int, root: Path, messiness: Messiness, researcher: Interruptions
 ) -> tuple[DemoResult, int, Counter[str]]:
     """A whole game; its result, how many answers the children gave (trials + poses) and
-    how they pressed."""
+    how they and the researcher pressed."""
     options = DemoOptions(
-        state_dir=root / str(seed), seed=seed, messiness=messiness, out=io.StringIO()
+        state_dir=root / str(seed),
+        seed=seed,
+        messiness=messiness,
+        interruptions=researcher,
+        out=io.StringIO(),
     )
 
     async def main() -> tuple[DemoResult, DemoRig[Any]]:
@@ -82,10 +100,21 @@ def one_game(
         kinds["early"] += press.early
         if words[0] in ("hold", "chord") and float(words[2]) >= config.researcher.hold_s:
             kinds[f"{words[0]} past the researcher's hold"] += 1
+    for action in rig.researcher_actions:
+        kinds[f"researcher {action.command}"] += 1
+    assert rig.game.session is not None
+    kinds["held, neither answer nor command"] += sum(
+        isinstance(r, PressRecord) and r.ignored == HELD for r in rig.game.session.records()
+    )
     return result, result.trials + shown, kinds
 
 
-def run_mode(mode: str, answers_wanted: int, messiness: Messiness = RATES) -> dict[str, Any]:
+def run_mode(
+    mode: str,
+    answers_wanted: int,
+    messiness: Messiness = RATES,
+    researcher: Interruptions = RESEARCHER,
+) -> dict[str, Any]:
     """Games in `mode` until the children have given `answers_wanted` answers."""
     config = config_for(mode)
     totals: dict[str, Any] = {
@@ -94,7 +123,9 @@ def run_mode(mode: str, answers_wanted: int, messiness: Messiness = RATES) -> di
         "answers": 0,
         "trials": 0,
         "accidental_commands": 0,
+        "commands_taken_as_answers": 0,
         "answers_lost": 0,
+        "stopped_by_researcher": 0,
         "unfinished": 0,
     }
     gaps: list[float] = []
@@ -104,14 +135,19 @@ def run_mode(mode: str, answers_wanted: int, messiness: Messiness = RATES) -> di
     with tempfile.TemporaryDirectory(prefix="kaspar-messy-") as scratch:
         seed = 0
         while totals["answers"] < answers_wanted:
-            result, answers, pressed = one_game(config, seed, Path(scratch), messiness)
+            result, answers, pressed = one_game(
+                config, seed, Path(scratch), messiness, researcher
+            )
             kinds += pressed
             totals["games"] += 1
             totals["answers"] += answers
             totals["trials"] += result.trials
             totals["accidental_commands"] += result.accidental_commands
+            totals["commands_taken_as_answers"] += result.commands_taken_as_answers
             totals["answers_lost"] += result.answers_lost
-            totals["unfinished"] += not result.finished
+            stopped = pressed["researcher stop"] > 0 and result.final_state == "stopped"
+            totals["stopped_by_researcher"] += stopped
+            totals["unfinished"] += not (result.finished or stopped)
             if result.answer_to_next_question_s is not None:
                 gaps.append(result.answer_to_next_question_s)
             if result.speech_s_per_trial is not None:
@@ -136,6 +172,7 @@ def main() -> int:
         totals = run_mode(mode, arguments.answers)
         ok = (
             totals["accidental_commands"] == 0
+            and totals["commands_taken_as_answers"] == 0
             and totals["answers_lost"] == 0
             and totals["unfinished"] == 0
         )
@@ -144,10 +181,12 @@ def main() -> int:
             print(json.dumps(totals))
         else:
             print(
-                f"{mode:7} {totals['games']} games, {totals['answers']} answers: "
-                f"{totals['accidental_commands']} accidental commands, "
-                f"{totals['answers_lost']} answers not taken, {totals['unfinished']} "
-                f"unfinished (targets 0, 0, 0: {'met' if ok else 'MISSED'}); answer to next "
+                f"{mode:7} {totals['games']} games ({totals['stopped_by_researcher']} stopped by "
+                f"the researcher), {totals['answers']} answers: "
+                f"{totals['accidental_commands']} commands a child started, "
+                f"{totals['commands_taken_as_answers']} researcher commands taken as answers, "
+                f"{totals['answers_lost']} answers lost, {totals['unfinished']} unfinished "
+                f"(targets 0, 0, 0, 0: {'met' if ok else 'MISSED'}); answer to next "
                 f"question {totals['answer_to_next_question_s_median']} s (median of games), "
                 f"speech {totals['speech_s_per_trial_mean']} s a trial; {totals['wall_s']} s\n"
                 f"        presses: {totals['presses']}"

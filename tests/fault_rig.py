@@ -140,7 +140,8 @@ class RecordedNotifier(Notifier):
 
 
 class Children:
-    """Honest children: they answer each question with the answer key, and teach each bag.
+    """Honest children: they answer each question with the answer key, teach each bag, and
+    press the button Kaspar asks for when it checks them.
 
     With one keyfob per child (`seats`), the child asked answers on their own seat's."""
 
@@ -159,6 +160,8 @@ class Children:
             self._spawn("green" if right else "red", keyfob)
         elif event is GameEvent.TEACH:
             self._spawn("green")
+        elif event is GameEvent.BUTTON_CHECK:
+            self._spawn(str(info["button"]))  # Kaspar checks the buttons: the one asked for
 
     def _spawn(self, action: str, keyfob: SimKeyfob | None = None) -> None:
         async def press() -> None:

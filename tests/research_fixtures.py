@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
-from rig_events import on_event
+from rig_events import answer_the_check, on_event
 
 from hal.servos.api import FaultKind
 from kasparctl.config import Config, SessionPlan
@@ -113,6 +113,7 @@ async def fault_then_stop(rig: DemoRig) -> None:
     assert rig.children is not None
     # Nobody answers trial 4: an answer's happy pose would meet the dead servo mid-move.
     rig.game.listeners.remove(rig.children)
+    answer_the_check(rig)
     await on_event(rig, "question", lambda info: info["trial"] == 4)
     fault = on_event(rig, "fault", lambda _: True)
     rig.servos.inject_fault("head_yaw", FaultKind.SILENT)

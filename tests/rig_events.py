@@ -21,3 +21,17 @@ def on_event(
 
     rig.game.listeners.append(listener)
     return future
+
+
+def answer_the_check(rig: DemoRig) -> None:
+    """The children's part of Kaspar's check of the buttons at the session's start, for a
+    test that plays the children itself: each button asked for is pressed at once."""
+    pressing: set[asyncio.Task[float]] = set()
+
+    def listener(event: str, info: dict[str, Any]) -> None:
+        if event == "button_check":
+            task = asyncio.get_running_loop().create_task(rig.keyfob.perform(info["button"]))
+            pressing.add(task)
+            task.add_done_callback(pressing.discard)
+
+    rig.game.listeners.append(listener)

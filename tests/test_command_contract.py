@@ -62,6 +62,8 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
         (["--view", "--fast"], "--view"),
         (["--speed", "2", "--fast"], "--fast"),
         (["--teacher", "t.toml", "--p-wrong-red", "0.1"], "--teacher"),
+        (["--p-researcher-pause", "1.5"], "--p-researcher-pause"),
+        (["--p-researcher-undo", "-1"], "--p-researcher-undo"),
     ],
     "run": [(["--keys", "/tmp/fifo"], "--keys")],
     "reload": [(["--runtime-dir", "/tmp"], "--pid"), (["--pid", "0"], "--pid")],

@@ -12,7 +12,7 @@ from typing import Any
 
 import msgspec
 import pytest
-from rig_events import on_event
+from rig_events import answer_the_check, on_event
 
 from hal.servos.api import FaultKind
 from kasparctl.config import Config
@@ -216,6 +216,7 @@ def test_prompts_go_on_to_the_researcher(tmp_path: Path) -> None:
     async def scenario(rig: DemoRig) -> None:
         assert rig.children is not None
         rig.game.listeners.remove(rig.children)  # the children do not answer
+        answer_the_check(rig)
         prompted = on_event(rig, "prompt", lambda info: info["line"] == "prompt.ask_researcher")
         await rig.command("next")
         await prompted
@@ -292,6 +293,7 @@ def test_every_command_where_it_applies_and_ignored_elsewhere(tmp_path: Path) ->
     async def researcher(rig: DemoRig) -> None:
         assert rig.children is not None
         rig.game.listeners.remove(rig.children)
+        answer_the_check(rig)
 
         async def gesture(command: str, then: str | None = None) -> None:
             """One command; with `then`, wait until the game has entered that stage."""
@@ -310,7 +312,7 @@ def test_every_command_where_it_applies_and_ignored_elsewhere(tmp_path: Path) ->
         await gesture("pause", then="paused")
         await gesture("next")  # paused: next does not apply
         await gesture("pause", then="placing")  # resume
-        await gesture("next", then="teaching")
+        await gesture("next", then="teaching")  # in the greeting: the check not begun
         await gesture("next")  # teaching: next does not apply before the bags are taught
         await gesture("stop", then="stopped")  # stop applies everywhere
 
@@ -510,6 +512,7 @@ def test_stop_works_even_while_a_fault_will_not_clear(tmp_path: Path) -> None:
         assert rig.children is not None
         await on_event(rig, "question", lambda info: info["trial"] == 2)
         rig.game.listeners.remove(rig.children)  # the researcher takes over
+        answer_the_check(rig)
         rig.servos.inject_fault("head_yaw", FaultKind.SILENT)  # and it never comes back
         await on_event(rig, "fault")
         await asyncio.sleep(3)

@@ -16,7 +16,14 @@ from kasparctl.game.jsonl import read_records
 from kasparctl.game.opening import open_new, planned
 from kasparctl.game.recorder import UNWRITTEN_LIMIT, Recorder
 from kasparctl.game.records import FaultSource, PromptRecord, SessionEvent, SessionRecord
-from kasparctl.game.routing import ChildGesture, ChildPress, NoCommand, ResearcherCommand, Router
+from kasparctl.game.routing import (
+    ChildGesture,
+    ChildPress,
+    HeldPress,
+    NoCommand,
+    ResearcherCommand,
+    Router,
+)
 from kasparctl.game.session import EventLog, Session
 from kasparctl.game.speech import VoiceFailed
 from kasparctl.game.storage import StorageFailed
@@ -190,16 +197,23 @@ def test_holds_are_the_researchers_only_on_the_keyfob_and_only_while_nobody_is_a
     device = Device(True)
     with_device = router("device", device)
     assert with_device.keyfob_needs() == ANSWERS_ONLY
-    assert with_device.from_keyfob(hold, never_asking) == ChildGesture("red", "long red", 5.0)
+    # A hold that reached the researcher's hold is never an answer, nor (no command on
+    # the keyfob now) a command.
+    assert with_device.from_keyfob(hold, never_asking) == HeldPress("red", "long red", 5.0)
     device.connected = False  # away: the researcher's commands are holds meanwhile
     assert with_device.commands_on_keyfob() and with_device.keyfob_needs() != ANSWERS_ONLY
     assert with_device.from_keyfob(hold, never_asking) == ResearcherCommand(
         Command.PAUSE, "long red", 5.0, "keyfob"
     )
-    # Begun while the children were asked: theirs, whatever it became.
-    assert isinstance(with_device.from_keyfob(hold, lambda at: True), ChildGesture)
+    # Begun while the children were asked: no command, and no answer either.
+    assert with_device.from_keyfob(hold, lambda at: True) == HeldPress("red", "long red", 5.0)
     chord = router("keyfob").from_keyfob(gesture(GestureKind.BOTH, "both", "red"), lambda at: True)
-    assert chord == ChildGesture("red", "both", 5.0)
+    assert chord == HeldPress("red", "both", 5.0)
+    # A double (never a command) is the children's: its first tap is a press.
+    double = gesture(GestureKind.DOUBLE, "green")
+    assert router("keyfob").from_keyfob(double, lambda at: True) == ChildGesture(
+        "green", "double green", 5.0
+    )
 
 
 def test_command_keys_say_where_they_came_from_and_a_key_of_no_command_is_recorded() -> None:

@@ -132,3 +132,18 @@ async def test_a_squeeze_begun_early_is_early_whatever_its_second_button_meets()
     presses.asked(4.0)
     assert presses.press("green", 4.5, "guessing").record is None
     assert await answer == ("green", 4.5)
+
+
+async def test_a_gesture_begun_just_after_a_question_was_abandoned_is_the_childrens() -> None:
+    """A fault cuts a question off while a child is about to press: a hold begun within the
+    gap for extras after is still theirs (on one keyfob, never a researcher's command)."""
+    presses = ChildPresses(extra_press_gap_s=1.0)
+    presses.open(10.0)
+    presses.asked(12.0)
+    presses.close(14.0)  # a fault, or a pause from the researcher's own device
+    assert presses.asking_at(14.9)
+    assert not presses.asking_at(15.1)
+    # Cut off by the researcher's own hold on the keyfob: their next hold is theirs.
+    presses.open(20.0)
+    presses.close(24.0, grace=False)
+    assert not presses.asking_at(24.1)

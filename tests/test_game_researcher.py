@@ -139,7 +139,8 @@ def test_a_resume_goes_back_where_the_game_was() -> None:
 def test_each_confirmation_fires_a_trigger_of_the_table() -> None:
     triggers = {transition["trigger"] for transition in TRANSITIONS}
     assert set(TRIGGERS.values()) <= triggers
-    # An undo, a re-open and closing a stopped session move no stage.
+    # An undo, a re-open, closing a stopped session and skipping the check of the
+    # buttons move no stage.
     assert set(TRIGGERS) == set(Confirmation) - {
         Confirmation.UNDO,
         Confirmation.CLOSE,
@@ -149,7 +150,23 @@ def test_each_confirmation_fires_a_trigger_of_the_table() -> None:
         Confirmation.CHOOSE,
         Confirmation.ABSENT,
         Confirmation.PRESENT,
+        Confirmation.SKIP_CHECK,
     }
+
+
+def test_next_while_kaspar_checks_the_buttons_skips_the_check_not_the_step() -> None:
+    checking = Facts(
+        Conditions(True, False, False, resume_step="placing"),
+        undo_available=False,
+        hardware_ready=True,
+        checking_buttons=True,
+    )
+    for stage in ("placing", "guessing"):
+        assert confirmation(stage, Command.NEXT, checking) is Confirmation.SKIP_CHECK
+    # Every other command does what it always does; paused, "next" is not a skip.
+    assert confirmation("placing", Command.PAUSE, checking) is Confirmation.PAUSE
+    assert confirmation("placing", Command.STOP, checking) is Confirmation.STOP
+    assert confirmation("paused", Command.NEXT, checking) is None
 
 
 def test_in_idle_a_stopped_session_waits_for_next_or_stop() -> None:

@@ -38,6 +38,7 @@ from kasparctl.game.phrases import load_phrasebook
 from kasparctl.game.records import (
     STATE_CHANGING,
     AnyRecord,
+    ButtonCheckRecord,
     CommandRecord,
     Confirmation,
     ConfusedRecord,
@@ -293,6 +294,8 @@ def test_every_reader_agrees_after_every_record_of_whole_games(games: list[Reade
     assert any(isinstance(r, HalRecord) and r.event is HalEvent.KEYFOB_LOST for r in records)
     changes = [r.event for r in records if isinstance(r, RotationRecord)]
     assert {"away", "skipped", "back"} <= set(changes), changes
+    # Each game's new session began with Kaspar's check of the buttons.
+    assert sum(isinstance(r, ButtonCheckRecord) for r in records) >= 4
     facts = [readers.reading.facts for readers in games]
     assert any(f.given_up for f in facts) and any(f.reopens for f in facts)
     assert any(g.confused for readers in games for g in readers.guesses.values())
@@ -378,8 +381,12 @@ class Played:
         self.readers = Readers(game, PARAMS, seed, self.plan)
         self.asked: TrialPlan | None = None
         self.write(SessionRecord(event=SessionEvent.START, plan=self.plan))
-        for step in ("placing", "teaching"):
-            self.write(StepRecord(to=step))
+        self.write(StepRecord(to="placing"))
+        # Kaspar checks the buttons: a prompt, a green, a red; no trial, no answer.
+        self.write(PromptRecord(line="buttons.green", waited=8.0))
+        self.write(ButtonCheckRecord(asked="green", pressed="green", at=0.0))
+        self.write(ButtonCheckRecord(asked="red", pressed="red", at=0.0))
+        self.write(StepRecord(to="teaching"))
         for bag in range(len(game.targets)):
             self.write(
                 PoseRecord(bag=bag, round=0, pose={"right_elbow": 10.0 * bag}, at=0, rule="median")

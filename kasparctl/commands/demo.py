@@ -33,6 +33,7 @@ from kasparctl.config import UNCERTAINTY_MODES, Config, load_config
 from kasparctl.game.language import with_language
 from kasparctl.game.lock import StateDirLock
 from kasparctl.log import configure_logging
+from kasparctl.sim.children import Interruptions
 from kasparctl.sim.demo import (
     DemoOptions,
     DemoResult,
@@ -103,6 +104,20 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--p-early", type=PROBABILITY, default=0.0, help="a press while Kaspar asks"
     )
+    # The researcher interrupting at any moment, open questions included: none of it may
+    # become the children's answer (commands_taken_as_answers in --json).
+    parser.add_argument(
+        "--p-researcher-pause", type=PROBABILITY, default=0.0,
+        help="per question: the researcher pauses at any moment, and resumes later",
+    )  # fmt: skip
+    parser.add_argument(
+        "--p-researcher-undo", type=PROBABILITY, default=0.0,
+        help="per answer: the researcher undoes it a moment later",
+    )  # fmt: skip
+    parser.add_argument(
+        "--p-researcher-stop", type=PROBABILITY, default=0.0,
+        help="per question: the researcher stops the session at any moment",
+    )  # fmt: skip
     parser.add_argument(
         "--json", action="store_true", help="end with one JSON line summarising the game"
     )
@@ -165,6 +180,9 @@ def run(arguments: argparse.Namespace) -> int:
         uncertainty=arguments.uncertainty,
         motion=arguments.motion,
         voice=arguments.voice,
+        interruptions=Interruptions(
+            arguments.p_researcher_pause, arguments.p_researcher_undo, arguments.p_researcher_stop
+        ),
         # A reader that goes away (`| head`) ends the demo, quietly (exit 0).
         out=cast(TextIO, Transcript(sys.stdout)),
     )

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
@@ -21,6 +21,7 @@ from kasparctl.body.api import GazeKind
 from kasparctl.config import GameSettings, SessionPlan
 from kasparctl.game.battery import BatteryWatch
 from kasparctl.game.bodywork import PLAIN_POINT, BodyWork, PointStyle, point
+from kasparctl.game.buttons import ButtonCheck
 from kasparctl.game.events import GameEvent
 from kasparctl.game.opening import OpenedSession
 from kasparctl.game.presses import ChildPresses, Press
@@ -68,6 +69,11 @@ class StepContext:
     showing: set[asyncio.Future[None]]
     # Whether the battery is already known to be low (outlives the game: Lasting).
     battery: BatteryWatch
+    # The session's check of the buttons (kasparctl.game.buttons), for the game's life.
+    buttons: ButtonCheck
+    # A whole prompt cycle passed with no answer to what was asked from this time: the
+    # game checks whether the keyfob was silent all along (a flat battery?).
+    unanswered: Callable[[float], None]
     # Whose turn the open question is, and which seat answered (kasparctl.game.rotation).
     turn: Turn = field(default_factory=Turn)
 
@@ -122,6 +128,7 @@ class StepContext:
                     return await asyncio.shield(answer)
             if index == len(prompts) - 1:
                 self.presses.hand_to_researcher(self.now())
+                self.unanswered(self.presses.question_start)
             self.record(PromptRecord(line=key, waited=delay))
             self.emit(GameEvent.PROMPT, line=key)
             await self.speech.say(key, **values)

@@ -21,8 +21,8 @@ class GameEvent(enum.StrEnum):
     RESUMED = "resumed"  # step: the stage the resumed session carries on in
     WAITING_FOR_RESEARCHER = "waiting_for_researcher"  # step: idle, placing or revealing
     # Kaspar starts asking: in step 4 trial, target, choice (indices), child and its
-    # child_index; in step 2 bag, round, mover, presser (children's names). Presses are
-    # early until it ends.
+    # child_index; in step 2 bag, round, mover, presser (children's names); in the check
+    # of the buttons button_check (the button asked for). Presses are early until it ends.
     ASKING = "asking"
     # bag, round, mover, presser: Kaspar has asked for bag's pose (from 0) and waits.
     TEACH = "teach"
@@ -35,6 +35,9 @@ class GameEvent(enum.StrEnum):
     QUESTION = "question"
     LISTENING = "listening"  # (none): Kaspar shows it listens (its pose, its sound)
     PROMPT = "prompt"  # line: the prompt's phrase key (nobody answered)
+    # button: at the start of a session Kaspar has asked for this button and listens
+    # (kasparctl.game.buttons); the press is no answer to any question.
+    BUTTON_CHECK = "button_check"
     ANSWERED = "answered"  # trial, feedback: the answer is recorded
     FAULT = "fault"  # kind: the FaultSource that stopped the game
     KEYFOB_BACK = "keyfob_back"  # (none): the keyfob is read again

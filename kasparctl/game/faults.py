@@ -38,6 +38,8 @@ STOPPED_BY: dict[FaultSource, tuple[str, ...]] = {
 # The researcher's own device going away stops nothing: their commands go to the
 # children's keyfob as holds meanwhile.
 STOPPED_BY[FaultSource.RESEARCHER] = ()
+# Nor a keyfob that seems silent (its battery?): a press clears it.
+STOPPED_BY[FaultSource.KEYFOB_SILENT] = ()
 # What Kaspar says of each kind: words for the children; the joint, the bus and the
 # reason are in the record, the journal and STATUS=.
 FAULT_LINES: Mapping[FaultSource, str] = {

@@ -42,6 +42,7 @@ and the records (records); the Game listens, decides and starts the steps.
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -60,6 +61,7 @@ from kasparctl.config import Config, SessionPlan
 from kasparctl.game import recovery, rotation
 from kasparctl.game.battery import BatteryWatch
 from kasparctl.game.bodywork import GREETING, BodyWork
+from kasparctl.game.buttons import ButtonCheck
 from kasparctl.game.context import StepContext
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.faults import (
@@ -96,6 +98,7 @@ from kasparctl.game.researcher import SILENT, SPOKEN_FIRST, TRIGGERS, Facts, con
 from kasparctl.game.routing import (
     ChildGesture,
     ChildPress,
+    HeldPress,
     ResearcherCommand,
     Routed,
     Router,
@@ -255,6 +258,13 @@ class Game:
         self._inputs = Inputs()
         self._step_task: asyncio.Task[None] | None = None
         self.presses = ChildPresses(self.settings.extra_press_gap_s)
+        self.buttons = ButtonCheck()
+        # When the children's keyfob last sent a key, and whether Kaspar has said it
+        # seems silent (a flat battery) in this game.
+        self._keyfob_heard_at = -math.inf
+        self._said_keyfob_silent = False
+        # The command being applied was the researcher's hold on the children's keyfob.
+        self._command_on_keyfob = False
         self.router = Router(config.researcher, self.settings.commands, self.hw.researcher)
         self.listeners: list[Listener] = []
         self.script = script(config.game.script)
@@ -320,6 +330,7 @@ class Game:
                 and self.stopped_waiting is None
                 and bool(self.queue.offered())
             ),
+            checking_buttons=self.buttons.running,
         )
 
     # -- the run loop -----------------------------------------------------------
@@ -396,6 +407,7 @@ class Game:
         if isinstance(event, FromResearcher):
             await self._on_researcher_input(event.event)
         elif isinstance(event, Gesture):
+            self._heard_keyfob(event.at)
             await self._act(self.router.from_keyfob(event, self.presses.asking_at), event.seat)
         elif isinstance(event, StepEnded):
             await self._on_step_ended(event)
@@ -438,6 +450,8 @@ class Game:
             self._child_press(routed.button, routed.at)
         elif isinstance(routed, ChildGesture):
             self._child_gesture(routed)
+        elif isinstance(routed, HeldPress):
+            self._record(self.presses.held(routed.button, routed.at, routed.name, self.stage))
         elif isinstance(routed, ResearcherCommand):
             await self._on_command(routed)
         else:
@@ -498,6 +512,13 @@ class Game:
     # -- the researcher's commands ------------------------------------------------
 
     async def _on_command(self, given: ResearcherCommand) -> None:
+        self._command_on_keyfob = given.source == "keyfob"
+        try:
+            await self._command(given)
+        finally:
+            self._command_on_keyfob = False
+
+    async def _command(self, given: ResearcherCommand) -> None:
         stage = self.stage
         key = confirmation(stage, given.command, self._facts())
         command = CommandRecord(
@@ -592,6 +613,9 @@ class Game:
                 raise outcome
 
     async def _fire(self, key: Confirmation) -> None:
+        if key is Confirmation.SKIP_CHECK:
+            self.buttons.skip()
+            return
         if key is Confirmation.UNDO:
             await self._undo()
             return
@@ -845,6 +869,8 @@ class Game:
             showing=self._showing,
             battery=self._battery,
             turn=self.turn,
+            buttons=self.buttons,
+            unanswered=self._unanswered,
         )
 
     async def _cancel_step(self) -> None:
@@ -865,7 +891,9 @@ class Game:
                     "a step carried on after being cancelled; cancelling again",
                     step=task.get_name(),
                 )
-        self.presses.close(self._now())
+        # A question the researcher's own hold on the keyfob cut off gives the children no
+        # grace: the researcher had the keyfob (and may hold it again at once).
+        self.presses.close(self._now(), grace=not self._command_on_keyfob)
 
     async def _on_step_ended(self, event: StepEnded) -> None:
         if event.step != self.stage:
@@ -938,6 +966,34 @@ class Game:
         self.problems.set(FaultSource.KEYFOB, None)
         self._emit(GameEvent.KEYFOB_BACK)
         self.speech.announce_soon("fault.keyfob_back")
+
+    def _heard_keyfob(self, at: float) -> None:
+        """A key of the children's keyfob: it is not silent (a suspicion is over)."""
+        self._keyfob_heard_at = max(self._keyfob_heard_at, at)
+        if FaultSource.KEYFOB_SILENT in self.problems:
+            self._record(HalRecord(event=HalEvent.KEYFOB_HEARD))
+            self.problems.set(FaultSource.KEYFOB_SILENT, None)
+
+    def _unanswered(self, since: float) -> None:
+        """A whole prompt cycle passed with no answer to what was asked at `since`: if the
+        children's keyfob sent nothing at all meanwhile while the researcher's own device
+        is there and working, its battery is suspected (recorded, STATUS=, said once)."""
+        device = self.hw.researcher
+        works = self.router.reads_device and device is not None and device.connected
+        if not works or self._keyfob_heard_at >= since:
+            return  # the children pressed something, or nothing tells the keyfob apart
+        if FaultSource.KEYFOB_SILENT in self.problems:
+            return
+        silent = self._now() - since
+        reason = (
+            f"no key from the children's keyfob for {silent:.0f} s of prompts while the "
+            "researcher's device works: its battery may be flat"
+        )
+        self._record(HalRecord(event=HalEvent.KEYFOB_SILENT, reason=reason))
+        self.problems.set(FaultSource.KEYFOB_SILENT, reason)
+        if not self._said_keyfob_silent:
+            self._said_keyfob_silent = True
+            self.speech.announce_soon("fault.keyfob_silent")
 
     def _on_researcher_lost(self, event: KeyfobLost) -> None:
         self._record(HalRecord(event=HalEvent.RESEARCHER_LOST, reason=event.reason))

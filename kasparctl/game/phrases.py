@@ -162,6 +162,13 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
         "fault.researcher_lost": _spec(about="the researcher's keypad is gone"),
         "fault.researcher_back": _spec(about="the researcher's keypad is back"),
         "fault.remote_battery_low": _spec(about="a remote's battery is below its warning level"),
+        "fault.keyfob_silent": _spec(
+            about="to the grown-up: the children's keyfob sent nothing for a while (battery?)"
+        ),
+        "buttons.start": _spec(about="a session's start: Kaspar checks the buttons"),
+        "buttons.green": _spec(about="the check: press green (again when nobody does)"),
+        "buttons.red": _spec(about="the check: now press red (again when nobody does)"),
+        "buttons.thanks": _spec(about="the check: both buttons work"),
         "fault.problem": _spec(about="any other fault"),
         "fault.storage": _spec(about="the records cannot be saved: a grown-up must stop"),
         "fault.battery_low": _spec(about="between trials: the battery fell below its line"),

@@ -21,10 +21,14 @@ question to answer and is recorded as such.
 
 One rule more, for a researcher who has only the children's keyfob: a gesture
 that began while the children were being asked (from the start of a question
-to `extra_press_gap_s` after its answer was taken) is the children's, whatever
+to `extra_press_gap_s` after its answer was taken, or after it was abandoned by
+anything but the researcher's own command on the keyfob) is the children's, whatever
 it became (a hold of 3 s, both buttons held): `asking_at` says so. Once Kaspar
 has begun to ask for a grown-up's help (`hand_to_researcher`), a hold begun from
-then on is the grown-up's again.
+then on is the grown-up's again. A hold that reached the researcher's hold is
+never the answer (`held`): a researcher's pause held during a question is the
+same keys as a child's long hold, so neither is taken; the question stays open,
+and a quick press (decided at its release on one keyfob) answers it.
 
 Pure bookkeeping on the times it is given: the game (kasparctl.game.machine)
 feeds it and acts on what it returns.
@@ -44,6 +48,7 @@ from kasparctl.game.records import PressRecord
 Press = tuple[str, float]  # the key ("green" or "red") and when it went down
 
 EARLY = "before the question was finished"
+HELD = "held as long as a researcher's command: not an answer"
 # Presses this close together are one gesture: a squeeze of both buttons, a double tap.
 SAME_GESTURE_S = 0.4
 # How many past questions `asking_at` remembers: a hold decided 3 s after its
@@ -138,6 +143,18 @@ class ChildPresses:
             return Outcome(self.extra(button, at))
         return Outcome(PressRecord(button=button, at=at, ignored=f"no question open ({stage})"))
 
+    def held(self, button: str, at: float, gesture: str, stage: str) -> PressRecord:
+        """The record of a hold begun at `at` that reached the researcher's hold and is no
+        command: never the answer; the open question stays open."""
+        last = self._last_answer_at
+        if self.waiting:
+            return PressRecord(button=button, at=at, gesture=gesture, ignored=HELD)
+        if last is not None and at - last <= self.extra_press_gap_s:
+            return self.extra(button, at, gesture=gesture)
+        return PressRecord(
+            button=button, at=at, gesture=gesture, ignored=f"no question open ({stage})"
+        )
+
     def extra(self, button: str, at: float, gesture: str | None = None) -> PressRecord:
         """The record of an extra: a press (or what the answer's press went on to be)."""
         return PressRecord(
@@ -166,11 +183,17 @@ class ChildPresses:
         """The last answer was taken back: a press after it is no extra."""
         self._last_answer_at = None
 
-    def close(self, at: float) -> None:
-        """The question is abandoned at `at` (its step was left): nobody waits for its answer."""
+    def close(self, at: float, grace: bool = True) -> None:
+        """The question is abandoned at `at` (its step was left): nobody waits for its answer.
+
+        With `grace`, a gesture begun within `extra_press_gap_s` after is still the
+        children's (a child mid-press as a fault stops the step), as after an answer;
+        without (the researcher's own command on the keyfob left it: they held the
+        keyfob), their next hold is theirs at once.
+        """
         if self._answer is not None and not self._answer.done():
             self._answer.cancel()
-            self._end_asking(at)
+            self._end_asking(at + (self.extra_press_gap_s if grace else 0.0))
         self._answer = None
 
     def _end_asking(self, at: float) -> None:

@@ -55,6 +55,10 @@ class HalEvent(enum.StrEnum):
     # The battery fell below [servos.battery] warn_below_v, or came back above it.
     BATTERY_LOW = "battery_low"
     BATTERY_OK = "battery_ok"
+    # The children's keyfob sent nothing through a whole prompt cycle while the
+    # researcher's device was there: a flat battery, suspected; heard again at its next key.
+    KEYFOB_SILENT = "keyfob_silent"
+    KEYFOB_HEARD = "keyfob_heard"
 
 
 class FaultSource(enum.StrEnum):
@@ -71,6 +75,9 @@ class FaultSource(enum.StrEnum):
     # The researcher's own device is gone: nothing stops (their commands go to the
     # children's keyfob as holds meanwhile), but it is shown and said.
     RESEARCHER = "researcher"
+    # The children's keyfob silent through a whole prompt cycle while the researcher's
+    # device works (its battery, suspected): nothing stops, it is shown and said once.
+    KEYFOB_SILENT = "keyfob_silent"
 
 
 class Confirmation(enum.StrEnum):
@@ -95,6 +102,8 @@ class Confirmation(enum.StrEnum):
     # (kasparctl.game.rotation).
     AWAY = "away"
     BACK = "back"
+    # The researcher's "next" while Kaspar checks the buttons: the check is skipped.
+    SKIP_CHECK = "skip_check"
 
 
 Button = Literal["green", "red"]
@@ -355,6 +364,17 @@ class ReopenRecord(Record, tag="reopen", kw_only=True, frozen=True):
     taken_back: bool | UnsetType = UNSET
 
 
+class ButtonCheckRecord(Record, tag="button_check", kw_only=True, frozen=True):
+    """At the start of a session Kaspar asked for the button `asked` (kasparctl.game.buttons):
+    `pressed` is the button that answered and `at` its key-down, or `skipped` when the
+    researcher's "next" skipped the rest of the check. No trial, no answer: history only."""
+
+    asked: Button
+    pressed: str | UnsetType = UNSET
+    at: float | UnsetType = UNSET
+    skipped: bool | UnsetType = UNSET
+
+
 class AlertRecord(Record, tag="alert", kw_only=True, frozen=True):
     """Something the researcher should know, found with the plan's answer key.
 
@@ -404,6 +424,7 @@ AnyRecord = (
     | ReopenRecord
     | AlertRecord
     | RotationRecord
+    | ButtonCheckRecord
 )
 
 # Records that change GameState when applied; every other kind is history only.

@@ -4,7 +4,8 @@ Pure rules, no I/O: the game (kasparctl.game.machine) asks them and acts.
 Which command applies where comes from the machine's own table
 (kasparctl.game.stages) through `may`: a command applies where the trigger it
 fires would move the machine. Only what the table cannot know is added here:
-the researcher's "next" never skips a step that ends by itself, undo needs an
+the researcher's "next" never skips a step that ends by itself (while Kaspar checks
+the buttons at a session's start it skips the check, not the step), undo needs an
 answer to take back, a re-open needs a learned name and a target still open
 (kasparctl.game.recovery), a resume from a fault needs the keyfob back, and in idle
 a stopped session waiting for the researcher's choice is reopened by "next"
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 
 from hal.keyfob.gestures import Gesture, GestureKind, GestureNeeds, held_gestures
 from kasparctl.game.records import Confirmation
-from kasparctl.game.stages import RESEARCHER_MOVES_ON, Conditions, may
+from kasparctl.game.stages import PAUSABLE, RESEARCHER_MOVES_ON, Conditions, may
 from kasparctl.vocabulary import Command
 
 # The machine's trigger each confirmation fires; an undo is no transition (the game
@@ -39,11 +40,13 @@ TRIGGERS: Mapping[Confirmation, str] = {
 # Kaspar confirms these before what they start; the others after what they stop. A
 # start has no confirmation of its own: the greeting that begins the session is it.
 SPOKEN_FIRST = frozenset({Confirmation.NEXT_STEP, Confirmation.RESUME})
-# A re-open is confirmed by the game itself, naming the name it re-opens.
+# A re-open is confirmed by the game itself, naming the name it re-opens; a skipped check
+# of the buttons by what Kaspar says next.
 SILENT = frozenset(
     {
         Confirmation.START,
         Confirmation.REOPEN,
+        Confirmation.SKIP_CHECK,
         # The next child is named as Kaspar asks them: nothing else is said.
         Confirmation.AWAY,
         Confirmation.BACK,
@@ -71,6 +74,8 @@ class Facts:
     away: Confirmation | None = None
     # In idle, before a session: planned sessions to choose from (none stopped waits).
     plans_to_choose: bool = False
+    # Kaspar is checking the buttons at the start of the session (kasparctl.game.buttons).
+    checking_buttons: bool = False
 
 
 def confirmation(stage: str, command: Command, facts: Facts) -> Confirmation | None:
@@ -96,6 +101,8 @@ def confirmation(stage: str, command: Command, facts: Facts) -> Confirmation | N
         if stage != "idle" or not facts.plans_to_choose:
             return None
         return Confirmation.CHOOSE if command is Command.CHOOSE else Confirmation.ABSENT
+    if facts.checking_buttons and stage in PAUSABLE:
+        return Confirmation.SKIP_CHECK  # "next" skips the check, not the step
     if may("start", stage, conditions):
         return Confirmation.START
     if stage in RESEARCHER_MOVES_ON and may("advance", stage, conditions):

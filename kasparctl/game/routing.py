@@ -44,6 +44,17 @@ class ChildGesture:
 
 
 @dataclass(frozen=True, slots=True)
+class HeldPress:
+    """A hold that reached the researcher's hold and is no command (begun while the
+    children were asked, or with no command for it): neither an answer nor a command,
+    recorded as what it was (kasparctl.game.presses.ChildPresses.held)."""
+
+    button: str
+    name: str
+    at: float
+
+
+@dataclass(frozen=True, slots=True)
 class ResearcherCommand:
     """The researcher's `command`, given by `gesture` at `at` on `source` (researcher,
     keypad or keyfob)."""
@@ -61,7 +72,7 @@ class NoCommand:
     record: PressRecord
 
 
-Routed = ChildPress | ChildGesture | ResearcherCommand | NoCommand
+Routed = ChildPress | ChildGesture | HeldPress | ResearcherCommand | NoCommand
 
 
 class Router:
@@ -103,7 +114,8 @@ class Router:
 
     def from_keyfob(self, gesture: Gesture, asking_at: Callable[[float], bool]) -> Routed:
         """A gesture of the children's keyfob: their answer, or (a hold, on one keyfob only,
-        begun while nobody is asked: not `asking_at` its start) the researcher's command."""
+        begun while nobody is asked: not `asking_at` its start) the researcher's command;
+        any other hold is neither (HeldPress)."""
         if gesture.kind is GestureKind.PRESS and gesture.button in ("green", "red"):
             return ChildPress(gesture.button, gesture.at)
         name = gesture_name(gesture)
@@ -115,9 +127,12 @@ class Router:
         # A hold, a chord or a double: the children's, or the researcher's on one keyfob.
         button = gesture.first if gesture.kind is GestureKind.BOTH else gesture.button
         command = self.commands.get(name) if self.commands_on_keyfob() else None
-        if command is None or asking_at(gesture.at):
-            return ChildGesture(button or "green", name, gesture.at)
-        return ResearcherCommand(command, name, gesture.at, "keyfob")
+        if command is not None and not asking_at(gesture.at):
+            return ResearcherCommand(command, name, gesture.at, "keyfob")
+        if gesture.kind in (GestureKind.LONG, GestureKind.BOTH):
+            # It reached the researcher's hold: whoever held it, it answers nothing.
+            return HeldPress(button or "green", name, gesture.at)
+        return ChildGesture(button or "green", name, gesture.at)
 
     def from_device(self, gesture: Gesture) -> ResearcherCommand | NoCommand:
         """A key of the researcher's own device: its command, or none."""

@@ -20,9 +20,11 @@ from msgspec import UNSET
 
 from kasparctl.game.battery import Crossing
 from kasparctl.game.bodywork import FAREWELL, GREETING
+from kasparctl.game.buttons import ASKED, pressed, skipped
 from kasparctl.game.context import StepContext
 from kasparctl.game.events import GameEvent
 from kasparctl.game.guess import Guess
+from kasparctl.game.presses import Press
 from kasparctl.game.records import HalEvent, HalRecord, PoseRecord, PressRecord, PromptRecord
 from kasparctl.game.state import GameState, far_from
 
@@ -52,6 +54,7 @@ class Steps:
         """Step 1: the researcher places the bags."""
         # The greeting first: the researcher's start has no words of its own.
         await self._greet()
+        await self._check_buttons()
         await self.ctx.speech.say("steps.place_bags", bags=str(len(self.ctx.settings.targets)))
         await self._wait_for_researcher("placing")
 
@@ -89,6 +92,7 @@ class Steps:
             if ctx.settings.variant == "pilot":
                 # The pilot starts here: the greeting first.
                 await self._greet()
+                await self._check_buttons()
                 await ctx.speech.say("steps.pilot")
             else:
                 await ctx.speech.say("steps.guessing")
@@ -134,6 +138,52 @@ class Steps:
         """Hello, said and shown together."""
         speech, body = self.ctx.speech, self.ctx.body
         await asyncio.gather(speech.say("session.greeting"), body.perform(GREETING))
+
+    async def _check_buttons(self) -> None:
+        """Kaspar asks for a green, then a red (kasparctl.game.buttons), once in a game;
+        the researcher's "next" skips the rest."""
+        ctx = self.ctx
+        check = ctx.buttons
+        if check.done:
+            return
+        skip = asyncio.ensure_future(check.begin().wait())
+        answer: asyncio.Future[Press] | None = None
+        try:
+            if not skip.done():
+                await ctx.speech.say("buttons.start")
+            for asked in ASKED:
+                if skip.done():
+                    ctx.record(skipped(asked))
+                    check.end()
+                    return
+                opened = ctx.presses.open(ctx.now())
+                ctx.emit(GameEvent.ASKING, button_check=asked)
+                await ctx.speech.say(f"buttons.{asked}")
+                ctx.presses.asked(ctx.now())
+                ctx.emit(GameEvent.BUTTON_CHECK, button=asked)
+                prompts: tuple[tuple[str, dict[str, str]], ...] = (
+                    (f"buttons.{asked}", {}),
+                    ("prompt.ask_researcher", {}),
+                )
+                answer = asyncio.ensure_future(ctx.wait_with_prompts(opened, prompts))
+                await asyncio.wait({answer, skip}, return_when=asyncio.FIRST_COMPLETED)
+                if not answer.done():
+                    ctx.presses.close(ctx.now())
+                    ctx.record(skipped(asked))
+                    check.end()
+                    return
+                button, at = answer.result()
+                ctx.presses.answered(at, None)
+                ctx.record(pressed(asked, button, at))
+            check.end()
+            await ctx.speech.say("buttons.thanks")
+        finally:
+            # Cut off (a pause, a fault) or skipped: nothing of it goes on prompting.
+            for task in (skip, answer):
+                if task is not None:
+                    task.cancel()
+            if not check.done:
+                check.left()
 
     async def _wait_for_researcher(self, step: str) -> None:
         """Wait for the researcher's "next"; after a long quiet, say once that Kaspar is ready."""

@@ -242,6 +242,7 @@ _EVENT_NAME = {
     "reopen": "name",
     "alert": "alert",
     "rotation": "event",
+    "button_check": "asked",
 }
 
 

@@ -62,6 +62,10 @@ class Walked:
         return None if self.guess is None else self.guess.cause
 
 
+# The phrase keys of the check of the buttons at a session's start (kasparctl.game.buttons).
+CHECK_LINES = "buttons."
+
+
 def walk(session: SessionData) -> Iterator[Walked]:
     """Every record of the session, streamed, with its child and (for trials) cause."""
     undone = session.index.undone
@@ -95,7 +99,9 @@ def walk(session: SessionData) -> Iterator[Walked]:
             answered = recent.get(record.trial) if extra else None  # type: ignore[arg-type]
             yield Walked(record, None if answered is None else answered[0], facts=reading.facts)
         elif isinstance(record, PromptRecord):
-            yield Walked(record, turn % size if step == "guessing" else None, facts=reading.facts)
+            # A prompt of the check of the buttons is to the whole group, no child's turn.
+            turn_taking = step == "guessing" and not record.line.startswith(CHECK_LINES)
+            yield Walked(record, turn % size if turn_taking else None, facts=reading.facts)
         else:
             if isinstance(record, StepRecord):
                 step = record.to

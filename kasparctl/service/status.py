@@ -39,6 +39,7 @@ PROBLEM_WORDS = {
     FaultSource.SOFTWARE: "software error",
     FaultSource.STORAGE: "CANNOT SAVE the records",
     FaultSource.RESEARCHER: "researcher's device not connected",
+    FaultSource.KEYFOB_SILENT: "children's keyfob silent (battery?)",
 }
 # What the researcher does about it: nothing more is played until it saves again.
 STORAGE_ADVICE = (

@@ -6,15 +6,22 @@ step waiting for the researcher) and answer like the simulator's teachers
 or not answer at all; a child who did not answer answers after a prompt. They
 may press messily (Messiness: holds, double taps, both buttons, early presses),
 and every press they make is kept (`presses`) so a run can check that each
-answer was taken and that no press of theirs became a researcher's command.
+answer was taken and that no press of theirs became a researcher's command. A
+press Kaspar did not take (a hold as long as a researcher's command, on one
+keyfob) is pressed again, quickly, when Kaspar asks again.
 The researcher gives commands through `command` (their own device, or holds on
-the children's keyfob). They act only through the simulated hardware, as real
-children would, so the game under test is the game on the robot.
+the children's keyfob), and may interrupt at any moment, open questions included
+(Interruptions: a pause and later the resume, an undo, a stop); a hold on one
+keyfob that Kaspar did not take (begun during a question) is given again a
+moment later. They act only through the simulated hardware, as real children
+would, so the game under test is the game on the robot.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import math
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -26,12 +33,25 @@ from hal.servos.settings import ServoSettings
 from kasparctl.game.events import GameEvent
 from kasparctl.game.records import FaultSource
 from kasparctl.game.recovery import to_reopen
-from kasparctl.sim.teacher import Messiness, Teacher
+from kasparctl.game.stages import ENDS, PAUSABLE
+from kasparctl.sim.teacher import Messiness, Teacher, TeacherError
 
 Say = Callable[[str], None]
 # The researcher's command ("next", "pause", "undo", "stop", "reopen"), however they give them.
 Command = Callable[[str], Awaitable[None]]
 MAX_RESUMES = 3
+# How long a child takes to press the button Kaspar asks for when it checks them (s).
+CHECK_THINK_S = 1.0
+# An interruption comes this long after Kaspar starts asking (or after an answer, for an
+# undo): across the question, the listening and the feedback (s).
+INTERRUPT_WITHIN_S = (0.0, 12.0)
+# A paused game is resumed after this long (s).
+PAUSED_FOR_S = (2.0, 8.0)
+# A researcher's hold Kaspar did not take is given again, this often, this long after
+# the children's next answer (past the game's 1 s for extras), or after WINDOW_WAIT_S.
+RETRY_AFTER_S = 1.2
+RETRIES = 8
+WINDOW_WAIT_S = 60.0
 # Where a child shows a bag is where the bag is, give or take this much (degrees).
 SHOW_NOISE_DEG = 3.0
 
@@ -59,7 +79,9 @@ class ChildPress:
     """One press a child made: for which question (trial) or bag, what they meant, when.
 
     `downs` are the times its keys went down (a double and a squeeze have two) and
-    `up` when the last one came up; `early` when made while Kaspar was still asking.
+    `up` when the last one came up; `early` when made while Kaspar was still asking;
+    `check` when it answered Kaspar's check of the buttons at the session's start;
+    `withdrawn` when it went down after Kaspar had paused or stopped.
     """
 
     trial: int | None
@@ -69,6 +91,44 @@ class ChildPress:
     downs: tuple[float, ...]
     up: float
     early: bool
+    check: bool = False
+    # Its key went down after Kaspar had paused or stopped (it waited for the keyfob):
+    # no question was open for it.
+    withdrawn: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class ResearcherAction:
+    """One command the researcher gave: `downs` when its keys went down, `up` when it was
+    done; `on_keyfob` when given on the children's keyfob (or keypad)."""
+
+    command: str
+    downs: tuple[float, ...]
+    up: float
+    on_keyfob: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Interruptions:
+    """How often the researcher interrupts: per question or request, a pause (resumed
+    PAUSED_FOR_S later) or a stop; per answer, an undo. Each comes INTERRUPT_WITHIN_S
+    after it began: during the question, the listening or the feedback."""
+
+    p_pause: float = 0.0
+    p_undo: float = 0.0
+    p_stop: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Refuse a probability outside [0, 1], naming it."""
+        for name in ("p_pause", "p_undo", "p_stop"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+                raise TeacherError(f"expected a probability in [0, 1], found {value!r}", name)
+
+    @property
+    def none(self) -> bool:
+        """The researcher never interrupts (nothing is drawn)."""
+        return not (self.p_pause or self.p_undo or self.p_stop)
 
 
 class SimulatedGroup:
@@ -90,6 +150,9 @@ class SimulatedGroup:
         researcher_s: float = 1.5,
         narrate: Say | None = None,
         patience: int = MAX_RESUMES,
+        interruptions: Interruptions | None = None,
+        researcher_rng: np.random.Generator | None = None,
+        shares_keyfob: Callable[[], bool] = lambda: False,
     ) -> None:
         """Children who press `keyfob` and move `servos`, believing `answers` (a toy per
         target); their researcher gives commands with `command`. Where the bags are is
@@ -121,16 +184,47 @@ class SimulatedGroup:
         self._faults = 0
         self._state = "idle"
         self._resuming = False
+        self.interruptions = interruptions or Interruptions()
+        # The researcher's commands are on the children's keyfob (or keypad) now: they
+        # take it in hand, and no child presses it while they hold it.
+        self.shares_keyfob = shares_keyfob
+        self._researcher_rng = researcher_rng or np.random.default_rng(0)
+        # How many times Kaspar has started asking, and the last answer pressed since
+        # (the count then, the press's question or bag, the button): not yet taken.
+        self._asked = 0
+        self._unheard: tuple[int, int | None, int | None, str] | None = None
+        self._interrupting = False
+        # Set when a hold on one keyfob could be a command again: an answer was taken (the
+        # children are asked nothing for a moment), Kaspar asked for a grown-up, a step.
+        self._window = asyncio.Event()
+        self._state_since = -math.inf
 
     def __call__(self, event: GameEvent, info: dict[str, Any]) -> None:
         """Hear a game event and act on it, as the children or the researcher would."""
         if event is GameEvent.STATE:
             self._state = str(info["state"])
+            self._state_since = asyncio.get_running_loop().time()
+            self._unheard = None
+            self._window.set()
+        elif event is GameEvent.ANSWERED:
+            self._unheard = None
+            self._window.set()
+            self._maybe_interrupt("undo", self.interruptions.p_undo)
+        elif event is GameEvent.ASKING:
+            self._asked += 1
+            self._maybe_interrupt("pause", self.interruptions.p_pause)
+            self._maybe_interrupt("stop", self.interruptions.p_stop)
+        elif event is GameEvent.PROMPT:
+            if info.get("line") == "prompt.ask_researcher":
+                self._window.set()
+            self._press_again()
         if event is GameEvent.WAITING_FOR_RESEARCHER:
             self._spawn(self._researcher_next())
         elif event is GameEvent.ASKING:
             if "trial" in info:
                 self._asking = (int(info["trial"]), int(info["target"]), int(info["choice"]))
+                # Asked again (after an undo or a re-open): it is open again.
+                self._answered.discard(int(info["trial"]))
                 if self._silent_question != self._asking:
                     self._silent_question = None
             self._spawn(self._eager(info))
@@ -144,6 +238,8 @@ class SimulatedGroup:
             self._spawn(self._answer(trial, target, choice, honest_now=True))
         elif event is GameEvent.TEACH:
             self._spawn(self._teach(int(info["bag"])))
+        elif event is GameEvent.BUTTON_CHECK:
+            self._spawn(self._try_button(str(info["button"])))
         elif event is GameEvent.CONFUSED:
             self._spawn(self._researcher_reopens(info["learned"]))
         elif _calls_researcher(event, info) and not self._resuming:
@@ -168,23 +264,99 @@ class SimulatedGroup:
 
     async def _press(
         self, action: str, who: str, *, trial: int | None = None, bag: int | None = None,
-        button: str = "", early: bool = False,
+        button: str = "", early: bool = False, check: bool = False,
     ) -> None:  # fmt: skip
         self.narrate(f"{who} presses {action.upper()}")
         start = await self.keyfob.perform(action)
         if who == "the researcher":
             return
+        if trial is not None or bag is not None:
+            self._unheard = (self._asked, trial, bag, button)
         self.presses.append(
             ChildPress(
-                trial, bag, button, action, _downs(action, start),
-                asyncio.get_running_loop().time(), early,
+                trial, bag, button, action, gesture_downs(action, start),
+                asyncio.get_running_loop().time(), early, check,
+                withdrawn=self._waiting() and self._state_since <= start,
             )
         )
+
+    def _press_again(self) -> None:
+        """Kaspar asks again after an answer was pressed for this question: it was not
+        taken (held too long on one keyfob); the child presses again, quickly."""
+        unheard = self._unheard
+        if unheard is None or unheard[0] != self._asked or self._silent_question is not None:
+            return
+        _, trial, bag, button = unheard
+        self._unheard = None
+        self._spawn(self._again(trial, bag, button))
+
+    async def _again(self, trial: int | None, bag: int | None, button: str) -> None:
+        await asyncio.sleep(0.5)
+        async with self._keyfob_free:
+            if (trial is not None and trial in self._answered) or self._waiting():
+                return
+            await self._press(button, "a child, again", trial=trial, bag=bag, button=button)
+
+    def _maybe_interrupt(self, command: str, chance: float) -> None:
+        """Draw whether the researcher gives `command` soon (nothing drawn at chance 0)."""
+        if chance == 0.0 or self._interrupting:
+            return
+        when, draw = (float(value) for value in self._researcher_rng.random(2))
+        if draw >= chance:
+            return
+        low, high = INTERRUPT_WITHIN_S
+        self._interrupting = True
+        self._spawn(self._interrupt(command, low + when * (high - low)))
+
+    async def _interrupt(self, command: str, after: float) -> None:
+        try:
+            await asyncio.sleep(after)
+            if self._state not in PAUSABLE:
+                return
+            if await self._until_taken(command) and command == "pause":
+                low, high = PAUSED_FOR_S
+                await asyncio.sleep(float(self._researcher_rng.uniform(low, high)))
+                if self._state == "paused":
+                    await self._until_taken("pause", resume=True)
+        finally:
+            self._interrupting = False
+
+    async def _until_taken(self, command: str, resume: bool = False) -> bool:
+        """Give `command` until the game shows it was taken (a hold on one keyfob begun
+        during a question is not); False if it is not taken after RETRIES tries."""
+        for attempt in range(RETRIES):
+            if attempt:
+                # Not taken: a hold begun during a question. Again once Kaspar has its
+                # answer (and the moment for extras is over), or asks for a grown-up.
+                self._window.clear()
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(WINDOW_WAIT_S):
+                        await self._window.wait()
+                await asyncio.sleep(RETRY_AFTER_S)
+            self.narrate(f"the researcher gives {command.upper()}")
+            await self._give(command)
+            await asyncio.sleep(RETRY_AFTER_S)
+            if command == "undo":
+                return True  # an undo shows in the records only: given once
+            paused = self._state == "paused"
+            if self._state in ENDS or (paused != resume):
+                return True
+            if self._state not in PAUSABLE:
+                return False  # the step it was meant for is over
+        return False
+
+    async def _give(self, command: str) -> None:
+        """The researcher gives `command`, taking the children's keyfob if it carries it."""
+        if not self.shares_keyfob():
+            await self.command(command)
+            return
+        async with self._keyfob_free:
+            await self.command(command)
 
     async def _researcher_next(self) -> None:
         await asyncio.sleep(self.researcher_s)
         self.narrate("the researcher gives NEXT")
-        await self.command("next")
+        await self._give("next")
 
     async def _researcher_resumes(self) -> None:
         # The researcher checks the robot, then resumes (again, if the robot refused);
@@ -196,7 +368,7 @@ class SimulatedGroup:
             self._faults += 1
             command = "stop" if self._faults > self.patience else "pause"
             self.narrate(f"the researcher gives {command.upper()}")
-            await self.command(command)
+            await self._give(command)
         finally:
             self._resuming = False
 
@@ -207,7 +379,7 @@ class SimulatedGroup:
         for _ in range(to_reopen(learned, self.answers)):
             await asyncio.sleep(self.researcher_s)
             self.narrate("the researcher gives REOPEN")
-            await self.command("reopen")
+            await self._give("reopen")
 
     def _reply(self, target: int, choice: int, honest_now: bool) -> bool | None:
         correct = choice == self.answers[target]
@@ -225,7 +397,7 @@ class SimulatedGroup:
         meant = "green" if choice == self.answers[target] else "red"
         action = self.messiness.action(meant, self.rng)
         async with self._keyfob_free:
-            if trial not in self._answered and self._asking == (trial, target, choice):
+            if self._open(trial, target, choice):
                 await self._press(action, "an eager child", trial=trial, button=meant, early=True)
 
     async def _answer(self, trial: int, target: int, choice: int, honest_now: bool = False) -> None:
@@ -239,10 +411,29 @@ class SimulatedGroup:
         action = self.messiness.action(button, self.rng)
         async with self._keyfob_free:
             # An eager press may have answered it, or it was abandoned and asked anew.
-            if trial not in self._answered and self._asking == (trial, target, choice):
+            if self._open(trial, target, choice):
                 await self._press(action, "a child", trial=trial, button=button)
 
+    async def _try_button(self, button: str) -> None:
+        """Kaspar checks the buttons: a child presses the one asked for, cleanly (no draw
+        from the children's stream: the game after it is the game it was before)."""
+        await asyncio.sleep(CHECK_THINK_S)
+        async with self._keyfob_free:
+            if not self._waiting():
+                await self._press(button, "a child", button=button, check=True)
+
+    def _open(self, trial: int, target: int, choice: int) -> bool:
+        """The question is still asked: not answered, not abandoned, and Kaspar not paused
+        or stopped (it said it would wait, or goodbye: the children stop too)."""
+        current = self._asking == (trial, target, choice)
+        return current and trial not in self._answered and not self._waiting()
+
+    def _waiting(self) -> bool:
+        """Kaspar said it would wait (paused) or said goodbye (stopped): nobody presses."""
+        return self._state == "paused" or self._state in ENDS
+
     async def _teach(self, bag: int) -> None:
+        asked = self._asked
         await self._think()
         # Each bag in its own place in the room, within what the arm can safely reach;
         # each child shows it a little differently.
@@ -262,10 +453,12 @@ class SimulatedGroup:
         self.narrate(f"a child moves Kaspar's arm towards bag {bag + 1}")
         await asyncio.sleep(0.5)
         action = self.messiness.action("green", self.rng)
+        if self._waiting() or self._asked != asked:
+            return  # Kaspar waits (the request is asked again once resumed), or it is over
         await self._press(action, "another child", bag=bag, button="green")
 
 
-def _downs(action: str, start: float) -> tuple[float, ...]:
+def gesture_downs(action: str, start: float) -> tuple[float, ...]:
     """When the keys of a keyfob action went down, performed from `start`."""
     words = action.split()
     if words[0] == "double":

@@ -31,7 +31,7 @@ import numpy as np
 from hal import Hardware
 from hal.clock import LoopClock
 from hal.errors import KasparError
-from hal.keyfob.sim import COMMAND_GESTURES, SimKeyfob, TerminalKeyfob
+from hal.keyfob.sim import SimKeyfob, TerminalKeyfob
 from hal.servos.api import ServoApi
 from hal.servos.sim import SimServos
 from hal.voice.api import VoiceOutput
@@ -46,6 +46,7 @@ from kasparctl.game.opening import OpenedSession, open_new
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.records import (
     AnyRecord,
+    ButtonCheckRecord,
     CommandRecord,
     FaultSource,
     PoseRecord,
@@ -55,7 +56,15 @@ from kasparctl.game.resume import Abandoned, resume_or_abandon
 from kasparctl.game.session import EventLog
 from kasparctl.game.stages import ENDS
 from kasparctl.sim import simtime
-from kasparctl.sim.children import MAX_RESUMES, ChildPress, Hands, SimulatedGroup
+from kasparctl.sim.children import (
+    MAX_RESUMES,
+    ChildPress,
+    Hands,
+    Interruptions,
+    ResearcherAction,
+    SimulatedGroup,
+    gesture_downs,
+)
 from kasparctl.sim.recording import MotionRecord, recorded_voice
 from kasparctl.sim.simulate import draw_answer_key
 from kasparctl.sim.teacher import DEFAULT_THINK_S, Messiness, Teacher
@@ -156,6 +165,8 @@ class DemoOptions:
     motion: Path | None = None
     # A real engine that says every line too, into WAV files the mouth follows.
     voice: str | None = None
+    # The researcher's pauses, undos and stops at any moment, open questions included.
+    interruptions: Interruptions = field(default_factory=Interruptions)
 
 
 @dataclass
@@ -175,6 +186,8 @@ class DemoResult:
     speech_s_per_trial: float | None = None
     # Researcher commands (applied or not) that a simulated child's press started.
     accidental_commands: int = 0
+    # The researcher's gestures the game took as the children's answer (a trial or a pose).
+    commands_taken_as_answers: int = 0
     # Answers the simulated children gave that the game did not take as they meant.
     answers_lost: int = 0
 
@@ -213,11 +226,15 @@ class DemoRig(Generic[ServosT]):
     body: Body = field(default_factory=StillBody)
     # The record of every goal written (--motion), closed with the robot.
     motion: MotionRecord | None = None
+    # Every command the researcher gave (the group's and a test's), with its key times.
+    researcher_actions: list[ResearcherAction] = field(default_factory=list)
 
     async def command(self, name: str) -> None:
         """The researcher's command `name` (next, pause, undo, stop), as they give it:
         a key of their device, or the hold on the children's keyfob that means it."""
-        await researcher_command(self.game.config, self.keyfob, self.researcher, name)
+        await researcher_command(
+            self.game.config, self.keyfob, self.researcher, name, self.researcher_actions
+        )
 
     async def run(self) -> DemoResult:
         """Start the simulated hardware, play (or resume) the session, close everything.
@@ -290,8 +307,9 @@ class DemoRig(Generic[ServosT]):
             state_dir=str(self.state_dir),
             answer_to_next_question_s=answer_to_next_question(trials),
             speech_s_per_trial=speech_per_trial(self.voice, trials),
-            accidental_commands=accidental_commands(records, presses),
-            answers_lost=len(lost_answers(records, presses)),
+            accidental_commands=accidental_commands(records, presses, self.researcher_actions),
+            commands_taken_as_answers=commands_taken_as_answers(records, self.researcher_actions),
+            answers_lost=len(lost_answers(records, presses, held_s(self.game.config))),
         )
 
 
@@ -372,6 +390,11 @@ def assemble(
         )
         return open_new(options.state_dir, config, with_key, options.seed)
 
+    actions: list[ResearcherAction] = []
+
+    async def give(name: str) -> None:
+        await researcher_command(config, keyfob, researcher, name, actions)
+
     hardware = Hardware(servos, keyfob, voice, researcher)
     # Before the session opens and after it ends, what happens goes where the service puts it.
     events = EventLog(options.state_dir)
@@ -393,8 +416,11 @@ def assemble(
             np.random.default_rng([options.seed, 1, progress]),
             pointing_group=config.game.pointing_group,
             think_s=options.think_s,
-            command=lambda name: researcher_command(config, keyfob, researcher, name),
+            command=give,
             messiness=options.messiness,
+            interruptions=options.interruptions,
+            shares_keyfob=lambda: researcher is None or not researcher.connected,
+            researcher_rng=np.random.default_rng([options.seed, 5, progress]),
             # The bags stay where they were put, whatever was interrupted.
             room=np.random.default_rng([options.seed, 4]),
             narrate=narrate,
@@ -407,33 +433,42 @@ def assemble(
     return DemoRig(
         game, servos, keyfob, voice, children, resumed is not None, options.state_dir,
         transcript=transcript, abandoned=outcome.abandoned, researcher=researcher, body=body,
-        motion=motion,
+        motion=motion, researcher_actions=actions,
     )
 
 
 async def researcher_command(
-    config: Config, keyfob: SimKeyfob, device: SimKeyfob | None, name: str
+    config: Config,
+    keyfob: SimKeyfob,
+    device: SimKeyfob | None,
+    name: str,
+    actions: list[ResearcherAction] | None = None,
 ) -> None:
     """Give the researcher's command `name` on `device`, or as the configured hold on the
-    children's `keyfob` (one keyfob, or the device away)."""
+    children's `keyfob` (one keyfob, or the device away); kept in `actions` with its key
+    times (how the demo tells the researcher's keys from the children's)."""
     if device is not None and device.connected:
-        await device.perform(f"command {name}")
-        return
-    if config.researcher.source == "keypad":
-        await keyfob.perform(f"command {name}")  # a command key of the children's keypad
-        return
-    gestures = {command: gesture for gesture, command in config.game.commands.items()}
-    gesture = gestures.get(name, COMMAND_GESTURES.get(name))
-    if gesture is None:
-        return  # no gesture means it on the children's keyfob (a re-open, by default)
-    # Held a little past the researcher's hold, as the keyfob's "long" actions are.
-    hold = config.researcher.hold_s + 0.3
-    if gesture == "both":
-        await keyfob.perform(f"chord green {hold:.3f}")
-    elif gesture.startswith("long "):
-        await keyfob.perform(f"hold {gesture.split()[1]} {hold:.3f}")
+        where, action = device, f"command {name}"
+    elif config.researcher.source == "keypad":
+        where, action = keyfob, f"command {name}"  # a command key of the children's keypad
     else:
-        await keyfob.perform(gesture)
+        gestures = {command: gesture for gesture, command in config.game.commands.items()}
+        gesture = gestures.get(name)
+        if gesture is None:
+            # No gesture means it on the children's keyfob (an undo or a re-open, by
+            # default): any other gesture there is the children's (a double red is a red).
+            return
+        # Held a little past the researcher's hold, as the keyfob's "long" actions are.
+        hold = config.researcher.hold_s + 0.3
+        where, action = keyfob, gesture
+        if gesture == "both":
+            action = f"chord green {hold:.3f}"
+        elif gesture.startswith("long "):
+            action = f"hold {gesture.split()[1]} {hold:.3f}"
+    start = await where.perform(action)
+    if actions is not None:
+        up = asyncio.get_running_loop().time()
+        actions.append(ResearcherAction(name, gesture_downs(action, start), up, where is keyfob))
 
 
 def answer_to_next_question(trials: Sequence[TrialRecord]) -> float | None:
@@ -455,28 +490,69 @@ def speech_per_trial(voice: VoiceOutput, trials: Sequence[TrialRecord]) -> float
     return round(words * 60.0 / BUDGET_WPM / len(trials), 3)
 
 
-def accidental_commands(records: Sequence[AnyRecord], presses: Sequence[ChildPress]) -> int:
+def accidental_commands(
+    records: Sequence[AnyRecord],
+    presses: Sequence[ChildPress],
+    researcher: Sequence[ResearcherAction] = (),
+) -> int:
     """Researcher commands begun by a child's press: a command whose gesture began while a
-    simulated child's keys were down (the children never touch the researcher's device)."""
-    commands = [r for r in records if isinstance(r, CommandRecord)]
+    simulated child's keys were down, and not at a key-down of the researcher's own (the
+    researcher may press their device while a child holds the keyfob)."""
+    theirs = {down for action in researcher for down in action.downs}
+    commands = [r for r in records if isinstance(r, CommandRecord) and r.at not in theirs]
     return sum(any(p.downs[0] <= c.at <= p.up for p in presses) for c in commands)
 
 
-def lost_answers(records: Sequence[AnyRecord], presses: Sequence[ChildPress]) -> list[str]:
+def commands_taken_as_answers(
+    records: Sequence[AnyRecord], researcher: Sequence[ResearcherAction]
+) -> int:
+    """The researcher's gestures the records show as the children's answer: a trial's
+    feedback or a shown bag's pose at a key-down of the researcher's (from the records and
+    the researcher's key times alone, whatever the game believed)."""
+    theirs = {down for action in researcher for down in action.downs}
+    answers = [r.feedback_at for r in records if isinstance(r, TrialRecord)]
+    answers += [r.at for r in records if isinstance(r, PoseRecord)]
+    return sum(at in theirs for at in answers)
+
+
+def held_s(config: Config) -> float | None:
+    """How long a hold on the children's keyfob is no answer (it reached the researcher's
+    hold, kasparctl.game.routing.HeldPress), when their commands are on it; else None."""
+    if config.researcher.source != "keyfob":
+        return None
+    return config.researcher.hold_s
+
+
+def lost_answers(
+    records: Sequence[AnyRecord], presses: Sequence[ChildPress], held: float | None = None
+) -> list[str]:
     """The children's answers the game did not take as they meant them.
 
     A trial's answer must be the children's first press for it made after the question
     ended, or an eager one the game took in the question's last words (the record says
     so; a double tap whose first tap came too early answers with its second), with the
     button meant. In step 2 every press that showed a bag must be the time of a pose
-    record (Kaspar read the arm when it came, whatever the press became).
+    record (Kaspar read the arm when it came, whatever the press became). With `held`
+    (one keyfob), a hold or squeeze of `held` seconds or more is no answer by the rule
+    (the children press again when Kaspar asks again), so it is not counted here.
     """
+    # A press that went down once Kaspar had paused or stopped had no question to answer.
+    presses = [p for p in presses if not p.withdrawn]
+    if held is not None:
+        presses = [p for p in presses if not _held_for(p.action, held)]
     trials = [r for r in records if isinstance(r, TrialRecord)]
     shown = {r.at for r in records if isinstance(r, PoseRecord)}
     lost = [
         f"bag {p.bag + 1} at {p.downs[0]:.3f}"
         for p in presses
         if p.bag is not None and not shown.intersection(p.downs)
+    ]
+    # Each press for Kaspar's check of the buttons is the press its record names.
+    checked = {(r.pressed, r.at) for r in records if isinstance(r, ButtonCheckRecord)}
+    lost += [
+        f"the check's {p.button} at {p.downs[0]:.3f}"
+        for p in presses
+        if p.check and (p.button, p.downs[0]) not in checked
     ]
     by_trial: dict[int, list[ChildPress]] = {}
     for press in presses:
@@ -492,6 +568,12 @@ def lost_answers(records: Sequence[AnyRecord], presses: Sequence[ChildPress]) ->
         if not meant or skipped:
             lost.append(f"trial {number}")
     return lost
+
+
+def _held_for(action: str, held: float) -> bool:
+    """Whether a keyfob action ("hold red 4.2", "chord green 3.1") is held `held` s or more."""
+    words = action.split()
+    return words[0] in ("hold", "chord") and float(words[2]) >= held
 
 
 async def play(config: Config, options: DemoOptions) -> DemoResult:

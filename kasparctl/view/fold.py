@@ -282,10 +282,14 @@ def _on_hal(view: SessionView, record: HalRecord) -> SessionView:
     if record.event is HalEvent.KEYFOB_LOST:
         # The fault record that follows says it stopped the game; this says the keyfob is gone.
         return replace(view, keyfob_lost=True)
-    if record.event is HalEvent.RESEARCHER_BACK:
+    if record.event in (HalEvent.RESEARCHER_BACK, HalEvent.KEYFOB_HEARD):
         return view
     if record.event in (HalEvent.BATTERY_LOW, HalEvent.BATTERY_OK):
         return _on_battery(view, record)
+    if record.event is HalEvent.KEYFOB_SILENT:
+        # Nothing stops for it: Kaspar tells the grown-up (the battery, suspected).
+        reason = record.reason if isinstance(record.reason, str) else "silent"
+        return replace(view, faults=(*view.faults, FaultSeen(record.time, "keyfob", reason)))
     if record.event is HalEvent.RESEARCHER_LOST:
         # Nothing stops for it: the researcher's holds on the children's keyfob meanwhile.
         reason = record.reason if isinstance(record.reason, str) else "lost"
