@@ -161,7 +161,8 @@ class Children:
         elif event is GameEvent.TEACH:
             self._spawn("green")
         elif event is GameEvent.BUTTON_CHECK:
-            self._spawn(str(info["button"]))  # Kaspar checks the buttons: the one asked for
+            # Kaspar checks the buttons: the one asked for (with seats, on the first seat's).
+            self._spawn(str(info["button"]), self.seats[0] if self.seats else None)
 
     def _spawn(self, action: str, keyfob: SimKeyfob | None = None) -> None:
         async def press() -> None:

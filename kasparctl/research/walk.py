@@ -53,7 +53,7 @@ class Walked:
     guess: Guess | None = None
     # What the records read once this one is applied: after the last record, what the
     # session ended with (a name re-opened and never asked again is not learned).
-    facts: Facts = field(default_factory=Facts)
+    facts: Facts = field(kw_only=True)  # required: no record may leave it out
 
     @property
     def cause(self) -> str | None:
@@ -84,7 +84,8 @@ def walk(session: SessionData) -> Iterator[Walked]:
             if len(recent) > _RECENT_TRIALS:
                 recent.popitem(last=False)
             turn += 1
-            yield Walked(record, record.child_index, record.trial in undone, guess, reading.facts)
+            undone_now = record.trial in undone
+            yield Walked(record, record.child_index, undone_now, guess, facts=reading.facts)
         elif isinstance(record, UndoRecord):
             child, turn = recent.get(record.trial, (None, turn - 1))
             yield Walked(record, child, facts=reading.facts)
@@ -93,7 +94,7 @@ def walk(session: SessionData) -> Iterator[Walked]:
             yield Walked(record, record.child_index, facts=reading.facts)
         elif isinstance(record, PressRecord):
             if isinstance(record.pressed_by_index, int):  # a seat's own keyfob
-                yield Walked(record, record.pressed_by_index)
+                yield Walked(record, record.pressed_by_index, facts=reading.facts)
                 continue
             extra = record.extra is True and isinstance(record.trial, int)
             answered = recent.get(record.trial) if extra else None  # type: ignore[arg-type]
