@@ -32,7 +32,7 @@ from kasparctl.game.records import (
     TrialRecord,
     UndoRecord,
 )
-from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
+from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, never_started
 from kasparctl.research.reader import Warnings, is_utf8, iter_records
 
 # plan.json is a few hundred bytes; one far larger is not a plan, and is not read whole.
@@ -67,6 +67,8 @@ class PlanFile(msgspec.Struct, kw_only=True, frozen=True):
     uid: str | None = None
     robot: str | None = None
     created: str = ""
+    # Its place among its state directory's sessions; 0 before sessions were numbered.
+    sequence: int = 0
     group: str | None = None
     condition: str | None = None
     variant: str = ""
@@ -445,13 +447,18 @@ def session_dirs(state_dir: Path) -> list[Path]:
     """Every session directory of a state directory, by name (their start time).
 
     A directory without a plan.json is listed too (it is a damaged session, and
-    says why); CatalogueError when the state directory cannot be listed.
+    says why), but not what a crash left of a session being made (never started:
+    game.session.never_started); CatalogueError when the state directory cannot be listed.
     """
     sessions = state_dir / "sessions"
     try:
         if not sessions.is_dir():
             return []
-        return sorted(p for p in sessions.iterdir() if p.is_dir() and not p.name.startswith("."))
+        return sorted(
+            p
+            for p in sessions.iterdir()
+            if p.is_dir() and not p.name.startswith(".") and not never_started(p)
+        )
     except PermissionError:
         raise CatalogueError(
             f"{sessions}: permission denied (the state directory is private to the robot's "
@@ -543,6 +550,9 @@ def open_sessions(directories: Iterable[Path]) -> Catalogue:
             continue
         seen[opened.uid] = directory
         catalogue.sessions.append(opened)
-    # Readable ids start with their UTC start time: by it, then by group, then by uid.
-    catalogue.sessions.sort(key=lambda s: (s.name, s.created, s.uid))
+    # Each state directory's in the order they began: its sequence number (the wall clock
+    # may have been wrong), then the readable id (its UTC start time), then the uid.
+    catalogue.sessions.sort(
+        key=lambda s: (str(s.directory.parent), s.meta.sequence, s.name, s.created, s.uid)
+    )
     return catalogue
