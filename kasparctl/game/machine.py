@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import msgspec
 import structlog
+from msgspec import UNSET
 from transitions.extensions.asyncio import AsyncMachine
 
 from hal import Hardware
@@ -112,6 +113,7 @@ from kasparctl.game.stages import (
 from kasparctl.game.state import GameState
 from kasparctl.game.steps import Steps
 from kasparctl.game.storage import StorageFailed, remove_tree
+from kasparctl.game.wallclock import ClockWatch, clock_record
 from kasparctl.log import bind_context
 from kasparctl.vocabulary import Command
 
@@ -142,13 +144,21 @@ class Lasting:
     recorder: Recorder
     problems: Problems
     open_session: Callable[[], OpenedSession]
+    # The wall clock watched (the daemon's): its state recorded at each session's start
+    # and each jump; None where nothing watches it (the demo, on a simulated clock).
+    clock: ClockWatch | None = None
 
     @classmethod
-    def new(cls, event_log: EventLog | None, open_session: Callable[[], OpenedSession]) -> Lasting:
+    def new(
+        cls,
+        event_log: EventLog | None,
+        open_session: Callable[[], OpenedSession],
+        clock: ClockWatch | None = None,
+    ) -> Lasting:
         """No problems yet; records go to `event_log` while no session is open (with none,
         they are only logged)."""
         problems = Problems()
-        return cls(Recorder(event_log, problems), problems, open_session)
+        return cls(Recorder(event_log, problems), problems, open_session, clock)
 
 
 @dataclass(frozen=True, slots=True)
@@ -217,6 +227,7 @@ class Game:
         self.recorder = lasting.recorder
         self.problems = lasting.problems
         self._open_session = lasting.open_session
+        self._clock = lasting.clock
         self.speech = Speech(self.picker, self.hw.voice, self._record, self._voice_health)
         self.speech.failing = self.problems.get(FaultSource.VOICE)
         self.body = BodyWork(
@@ -317,6 +328,7 @@ class Game:
                 await self._survive(error, "starting the game")
             while self.stage not in ENDS:
                 await self._take(await self._inputs.get())
+                self._record_clock_jump()
             # No more keyfob events taken (they stay queued in the keyfob for the next
             # game); those already taken are still handled.
             await self._inputs.stop_reading()
@@ -334,7 +346,13 @@ class Game:
             session = self._require_session()
             bind_context(session=session.id)
             trials = self._require_state().trials
-            self._record(SessionRecord(event=SessionEvent.RESUMED, step=self.stage, trials=trials))
+            repaired = session.repairs or UNSET
+            self._record(
+                SessionRecord(
+                    event=SessionEvent.RESUMED, step=self.stage, trials=trials, repaired=repaired
+                )
+            )
+            self._record_clock()
             self._emit(GameEvent.RESUMED, step=self.stage)
             await self.speech.announce("session.resumed")
         # What went wrong before the game began stops it before a step starts.
@@ -529,6 +547,7 @@ class Game:
         self._record(
             SessionRecord(event=SessionEvent.RESUMED, step=_resume_step(state), trials=state.trials)
         )
+        self._record_clock()
         self._emit(GameEvent.SESSION, session=opened.session.id)
         # The children may be new to Kaspar today: the greeting first, as at any start.
         await asyncio.gather(self.speech.announce("session.greeting"), self.body.perform(GREETING))
@@ -560,6 +579,7 @@ class Game:
             raise
         self._take_session(opened)
         bind_context(session=session.id)
+        self._record_clock()
         self.problems.set(FaultSource.STORAGE, None)
         self._emit(GameEvent.SESSION, session=session.id)
 
@@ -815,6 +835,17 @@ class Game:
 
     def _record(self, record: RecordT) -> RecordT | None:
         return self.recorder.record(record)
+
+    def _record_clock(self) -> None:
+        """The wall clock's state, as a session starts or resumes (game.wallclock)."""
+        if self._clock is not None:
+            self._record(clock_record(self._clock.read()))
+
+    def _record_clock_jump(self) -> None:
+        """The wall clock's state again, when it has jumped since the last reading."""
+        if self._clock is not None and (reading := self._clock.jumped()) is not None:
+            log.warning("the wall clock jumped", step_s=reading.step, source=reading.source.source)
+            self._record(clock_record(reading))
 
     def _change(self, record: RecordT) -> RecordT:
         return self.recorder.change(record, self._require_state(), self.settings)

@@ -189,6 +189,8 @@ class Session:
         self.plan = plan
         self.id: str = plan["session"]
         self.last_seq = last_seq
+        # What opening it found and repaired (Session.open), one line each: said, not silent.
+        self.repairs: list[str] = []
         self._log = RecordLog(directory / RECORDS_FILE, recreate=self._recreate_directory)
 
     def _recreate_directory(self) -> None:
@@ -266,7 +268,11 @@ class Session:
             log.warning("session records repaired", detail=warning)
         # Every line that is JSON counts, a record or not: its seq is never given again.
         last_seq = max((line_seq(record) for record in read.records), default=0)
-        return cls(directory, plan, last_seq), read.warnings
+        session = cls(directory, plan, last_seq)
+        session.repairs = [
+            warning.removeprefix(f"{directory}/") for warning in read.warnings
+        ]
+        return session, read.warnings
 
     # -- state ----------------------------------------------------------------
 

@@ -24,8 +24,10 @@ import msgspec
 
 from hal.errors import KasparError
 from kasparctl.config import CONDITION_LABELS, SPOKEN_MODES
+from kasparctl.game.jsonl import TORN_SUFFIX
 from kasparctl.game.records import (
     AnyRecord,
+    ClockRecord,
     SessionEvent,
     SessionRecord,
     StepRecord,
@@ -104,6 +106,9 @@ class SessionIndex:
     # Trials whose per-toy lists are not as long as the session's toys (damage).
     other_width: int = 0
     warnings: list[str] = field(default_factory=list)
+    # Whether the wall clock was synchronised at every clock record (game.wallclock);
+    # None for a session without one (older, or the demo's simulated clock).
+    clock_synchronised: bool | None = None
 
     @property
     def trials(self) -> int:
@@ -279,6 +284,25 @@ class SessionData:
         """How many times the robot carried this session on after a crash or restart."""
         return self.index.resumed
 
+    @property
+    def recovered(self) -> str | None:
+        """What a crash cost the session, found when it was resumed or read: a torn last
+        record (never fsynced, so never reacted to), kept aside; None when nothing."""
+        torn = self.directory / f"{RECORDS_FILE}{TORN_SUFFIX}"
+        try:
+            size = torn.stat().st_size
+        except OSError:
+            size = 0
+        pending = [w for w in self.index.warnings if "the last line was torn" in w]
+        if size:
+            return (
+                f"a crash tore its last record ({size} bytes, never fsynced: "
+                f"kept in {torn.name}); nothing saved was lost"
+            )
+        if pending:
+            return "a crash tore its last record (never fsynced); repaired when it resumes"
+        return None
+
     def first_names(self) -> dict[str, str]:
         """Each first name in the plan and the pseudonym that replaces it ("child 2")."""
         return {name: f"child {index + 1}" for index, name in enumerate(self.children) if name}
@@ -404,6 +428,8 @@ def index_session(directory: Path) -> SessionIndex:
             index.last_step = record.to
         elif isinstance(record, SessionRecord) and record.event is SessionEvent.RESUMED:
             index.resumed += 1
+        elif isinstance(record, ClockRecord):
+            index.clock_synchronised = record.synchronised and index.clock_synchronised is not False
     if not toys:
         # Failing a full guess, positions are named from the choices.
         toys = tuple(chosen.get(i, f"toy {i + 1}") for i in range(width))

@@ -69,6 +69,7 @@ from kasparctl.game.resume import (
 from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, EventLog, is_finished, session_dirs
 from kasparctl.game.stages import ENDS
 from kasparctl.game.storage import StorageFailed
+from kasparctl.game.wallclock import ClockWatch
 from kasparctl.log import configure_logging
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
 from kasparctl.service.sdnotify import Notifier, watchdog_interval
@@ -135,7 +136,7 @@ class Daemon:
         self.listeners = list(listeners)
         self.events = EventLog(self._state_dir)
         # What outlives each game: the records the disk refused, and what is not working.
-        self.lasting = Lasting.new(self.events, self._open_session)
+        self.lasting = Lasting.new(self.events, self._open_session, ClockWatch())
         self.lock = StateDirLock(self._state_dir)
         self._stopping = asyncio.Event()
         self._stop_reason = ""
@@ -389,7 +390,9 @@ class Daemon:
     def _status(self, game: Game) -> str:
         """STATUS=: the stage, Kaspar confused (and what reopen would do), the problems."""
         confused = recovery_words(game.session_state, game.settings)
-        return status_line(game.stage, game.problems, self._notice, confused)
+        clock = self.lasting.clock.last if self.lasting.clock is not None else None
+        unsynchronised = clock is not None and not clock.source.synchronised
+        return status_line(game.stage, game.problems, self._notice, confused, unsynchronised)
 
     def _on_game_event(self, event: GameEvent, info: dict[str, Any]) -> None:
         game = self.game
@@ -439,6 +442,11 @@ class Daemon:
             return None
         session, state = resumable.session, resumable.state
         log.info("resuming session", session=session.id, step=state.step, trials=state.trials)
+        if session.repairs:
+            # A crash tore the last record (never fsynced, so never reacted to): said.
+            self._notice = f"session {session.id} resumed after a crash: " + "; ".join(
+                session.repairs
+            )
         return OpenedSession(session, resumable.plan, state)
 
     def _note_abandoned(self, abandoned: Abandoned, clock: float) -> None:

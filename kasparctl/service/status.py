@@ -47,6 +47,8 @@ STORAGE_ADVICE = (
 # systemd keeps STATUS= whole, but a line this long is still read at a glance.
 DETAIL_LIMIT = 200
 STATUS_LIMIT = 600
+# Said while the wall clock is not synchronised (kasparctl.game.wallclock; docs/install.md).
+CLOCK_WORDS = "clock unsynchronised: record times may be wrong (order and ages are not)"
 
 
 def status_line(
@@ -54,9 +56,11 @@ def status_line(
     problems: Mapping[FaultSource, str] | None = None,
     notice: str | None = None,
     confused: str | None = None,
+    clock_unsynchronised: bool = False,
 ) -> str:
     """The STATUS= text for `stage` with `problems` (part -> why), each reason cut to a limit,
-    and a `notice` (a session abandoned) last; `confused` (recovery_words) after the stage."""
+    and a `notice` (a session abandoned) last; `confused` (recovery_words) after the stage;
+    CLOCK_WORDS when `clock_unsynchronised`."""
     words = STATUS_WORDS.get(stage, stage)
     if confused:
         words = f"{words} | {confused}"
@@ -67,6 +71,8 @@ def status_line(
     ]
     if notice:
         parts.append(_cut(notice, DETAIL_LIMIT))
+    if clock_unsynchronised:
+        parts.append(CLOCK_WORDS)
     return _cut(" | ".join([words, *parts]), STATUS_LIMIT)
 
 

@@ -54,6 +54,7 @@ from kasparctl.game.records import (
 from kasparctl.game.resume import Abandoned, resume_or_abandon
 from kasparctl.game.session import EventLog
 from kasparctl.game.stages import ENDS
+from kasparctl.game.wallclock import ClockWatch
 from kasparctl.sim import simtime
 from kasparctl.sim.children import MAX_RESUMES, ChildPress, Hands, SimulatedGroup
 from kasparctl.sim.recording import MotionRecord, recorded_voice
@@ -155,6 +156,9 @@ class DemoOptions:
     motion: Path | None = None
     # A real engine that says every line too, into WAV files the mouth follows.
     voice: str | None = None
+    # The wall clock watched, its state recorded as the service records it (None: not
+    # watched, as the demo's clock is simulated; a test injects one).
+    clock: ClockWatch | None = None
 
 
 @dataclass
@@ -376,7 +380,9 @@ def assemble(
         # Seeded like everything else in the demo: blinks at the same moments, the same game.
         body = make_body(config, servos, voice, rng=random.Random(options.seed))
     game = Game(
-        Setup(config, hardware, picker, body), Lasting.new(events, open_session), Start(resumed)
+        Setup(config, hardware, picker, body),
+        Lasting.new(events, open_session, options.clock),
+        Start(resumed),
     )
     children = None
     if not options.interactive:
