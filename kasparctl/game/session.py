@@ -458,7 +458,9 @@ def session_dirs(state_dir: Path) -> Iterator[Path]:
     """Every session directory, oldest first: in the order they began (session_order)."""
     sessions = state_dir / "sessions"
     if sessions.is_dir():
-        found = [p for p in sessions.iterdir() if (p / PLAN_FILE).is_file()]
+        found = [
+            p for p in sessions.iterdir() if not p.name.startswith(".") and (p / PLAN_FILE).is_file()
+        ]
         yield from sorted(found, key=session_order)
 
 
@@ -486,6 +488,8 @@ def last_session(sessions: Path) -> tuple[int, str | None]:
     """The highest sequence number among the sessions in `sessions`, and the latest uid."""
     sequence, uids = 0, []
     for directory in sessions.iterdir():
+        if directory.name.startswith("."):
+            continue
         try:
             plan = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
         except (OSError, *UNDECODABLE):
