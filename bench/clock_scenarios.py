@@ -241,17 +241,17 @@ def _shift(seconds: float) -> str:
     return f"{seconds / 3600:+.0f} h"
 
 
-def press_and_wait(running: RunningService, key: str, session: Path, kind: str, field: str) -> None:
-    """Press `key`, and wait for one more record whose `field` is `kind`."""
+def press_and_wait(
+    running: RunningService, key: str, session: Path, field: str, value: str
+) -> None:
+    """Press `key`, and wait for one more record whose `field` is `value`."""
 
     def count() -> int:
-        return sum(
-            1 for r in records(session) if r.get(field if field != "fault" else "kind") == kind
-        )
+        return sum(1 for r in records(session) if r.get(field) == value)
 
     before = count()
     running.press(key)
-    wait(lambda: count() > before, kind)
+    wait(lambda: count() > before, value)
 
 
 def ages(base: Path, shim: Path, source: Path | None) -> dict[str, Any]:

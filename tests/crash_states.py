@@ -170,7 +170,8 @@ def record_game(variant: str, seed: int = 1) -> list[Op]:
             # What a daemon writes before a session: the event log exists as on the robot.
             EventLog(state_dir).record(HalRecord(event=HalEvent.KEYFOB_BACK, device="sim"), 0.0)
             options = DemoOptions(state_dir=state_dir, seed=seed, out=io.StringIO())
-            result = run_demo(config, options, fast=True)
+            with contextlib.redirect_stdout(io.StringIO()):  # the demo's log lines
+                result = run_demo(config, options, fast=True)
         assert result.finished, result
         return recorder.ops
 

@@ -237,3 +237,30 @@ def test_a_resume_that_repaired_a_torn_record_says_so(tmp_path: Path) -> None:
     assert repair.startswith("records.jsonl: the last line was torn (22 bytes"), repair
     listed = _cli("sessions", "--state-dir", str(tmp_path))
     assert "a crash tore its last record (23 bytes" in listed, listed
+
+
+def test_the_service_s_status_says_the_resume_repaired_a_torn_record(tmp_path: Path) -> None:
+    import asyncio
+
+    from kasparctl.service.daemon import Daemon, DaemonOptions
+    from kasparctl.service.sdnotify import Notifier
+
+    config_path = Path(__file__).resolve().parents[1] / "kasparctl" / "sim" / "demo.toml"
+    run_demo(demo_config(), DemoOptions(tmp_path, seed=1, out=io.StringIO()), fast=True)
+    (directory,) = session_dirs(tmp_path)
+    cut_after_trial(directory, 5)
+    with (directory / RECORDS_FILE).open("ab") as records:
+        records.write(b'{"kind":"press","seq":')
+    daemon = Daemon(
+        DaemonOptions(str(config_path), sim=True, state_dir=str(tmp_path)), Notifier("")
+    )
+
+    async def resume() -> None:
+        opened = daemon._resume()
+        assert opened is not None
+        opened.session.close()
+
+    asyncio.run(resume())
+    assert daemon._notice is not None
+    assert daemon._notice.startswith(f"session {directory.name} resumed after a crash: ")
+    assert "records.jsonl: the last line was torn (22 bytes" in daemon._notice
