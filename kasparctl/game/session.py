@@ -459,7 +459,9 @@ def session_dirs(state_dir: Path) -> Iterator[Path]:
     sessions = state_dir / "sessions"
     if sessions.is_dir():
         found = [
-            p for p in sessions.iterdir() if not p.name.startswith(".") and (p / PLAN_FILE).is_file()
+            p
+            for p in sessions.iterdir()
+            if not p.name.startswith(".") and (p / PLAN_FILE).is_file()
         ]
         yield from sorted(found, key=session_order)
 
