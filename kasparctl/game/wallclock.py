@@ -127,9 +127,11 @@ class ClockWatch:
 
     def jumped(self) -> ClockReading | None:
         """A new reading when the wall clock has stepped by more than the threshold since
-        the last one (the first call reads), else None (nothing probed)."""
+        the last one, else None (nothing probed; a first call only takes the offset to
+        measure from: a session's start reads the clock's state)."""
         if self._offset is None:
-            return self.read()
+            self._offset = self._offset_now()
+            return None
         if abs(self._offset_now() - self._offset) <= self._jump_s:
             return None
         return self.read()
