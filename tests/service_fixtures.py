@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from kasparctl.game.session import RECORDS_FILE
+from kasparctl.service.status import CLOCK_WORDS
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO_CONFIG = REPO / "kasparctl" / "sim" / "demo.toml"
@@ -176,6 +177,12 @@ class OutputLines:
         self._thread.join(seconds)
         assert not self._thread.is_alive(), "the stream did not end"
         return "\n".join(self.lines)
+
+
+def status_is(wanted: str) -> Callable[[str], bool]:
+    """A STATUS= text that says `wanted`, with the clock's warning after it or not (whether
+    the machine running the tests has a synchronised clock is not the test's)."""
+    return lambda text: text.removesuffix(f" | {CLOCK_WORDS}") == wanted
 
 
 def spoken(line: str, phrases: list[str]) -> bool:

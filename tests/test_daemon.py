@@ -21,6 +21,7 @@ from service_fixtures import (
     read_session_records,
     running_service,
     spoken,
+    status_is,
     wait_for_record,
 )
 
@@ -73,7 +74,7 @@ def test_ready_status_watchdog_and_a_clean_stop(daemon: RunningService) -> None:
     notify.wait_for("WATCHDOG=1")  # pings again once the loop runs
 
     # STATUS follows the game (it may have come while the pings were watched).
-    notify.wait_for("STATUS=step 1: placing the bags", since=pressed)
+    notify.wait_for_status(status_is("step 1: placing the bags"), since=pressed)
 
     daemon.process.send_signal(signal.SIGTERM)
     notify.wait_for("STOPPING=1")

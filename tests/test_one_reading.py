@@ -11,9 +11,11 @@ from __future__ import annotations
 import asyncio
 import csv
 import io
+import itertools
 import json
 import random
 import tempfile
+import time
 import typing
 from pathlib import Path
 from typing import Any
@@ -39,6 +41,7 @@ from kasparctl.game.records import (
     STATE_CHANGING,
     AnyRecord,
     ButtonCheckRecord,
+    ClockRecord,
     CommandRecord,
     Confirmation,
     ConfusedRecord,
@@ -63,6 +66,7 @@ from kasparctl.game.scripts import script
 from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, Session, state_to_plain
 from kasparctl.game.state import GameState, restore
 from kasparctl.game.trial import Answer, TrialPlan, plan_trial, question_record, score_answer
+from kasparctl.game.wallclock import ClockWatch
 from kasparctl.learning.learner import LearnerParams
 from kasparctl.service.status import recovery_words
 from kasparctl.sim import simtime
@@ -260,6 +264,17 @@ async def researcher_and_breakage(rig: DemoRig) -> None:
         taking_back.cancel()
 
 
+def stepping_clock() -> ClockWatch:
+    """A wall clock 2 h behind (fake-hwclock after a power cut) that steps 3 years ahead
+    mid-game (a network appears), on a robot without timesyncd."""
+    readings = itertools.count()
+
+    def wall() -> float:
+        return time.time() - 7200 + (3 * 365 * 86400 if next(readings) > 40 else 0)
+
+    return ClockWatch(run=lambda command: None, wall=wall, boot=lambda: "")
+
+
 MESSY = Teacher(p_wrong_green=0.15, p_wrong_red=0.05, p_no_answer=0.1)
 # Children whose presses are messy too: held, doubled, squeezed, too early.
 HANDS = Messiness(p_hold=0.05, p_double=0.1, p_both=0.05, p_early=0.1)
@@ -274,7 +289,12 @@ def games(tmp_path_factory: pytest.TempPathFactory, given_up: Path, reopened: Pa
     state_dir = tmp_path_factory.mktemp("messy")
     config = demo_config()
     options = DemoOptions(
-        state_dir=state_dir, seed=2, teacher=MESSY, messiness=HANDS, out=io.StringIO()
+        state_dir=state_dir,
+        seed=2,
+        teacher=MESSY,
+        messiness=HANDS,
+        out=io.StringIO(),
+        clock=stepping_clock(),
     )
     play_scenario(state_dir, config, options, researcher_and_breakage)
     (session_dir,) = (state_dir / "sessions").iterdir()
@@ -290,6 +310,8 @@ def test_every_reader_agrees_after_every_record_of_whole_games(games: list[Reade
     assert kinds == set(typing.get_args(AnyRecord)), set(typing.get_args(AnyRecord)) - kinds
     assert any(isinstance(r, ReopenRecord) and r.taken_back is True for r in records)
     assert any(isinstance(r, SessionRecord) and r.event is SessionEvent.RESUMED for r in records)
+    # The clock's state at the start and resume, and its jump of 3 years, noticed.
+    assert any(isinstance(r, ClockRecord) and r.step > 3 * 365 * 86400 - 60 for r in records)
     assert any(isinstance(r, FaultRecord) and r.joint == "head_yaw" for r in records)
     assert any(isinstance(r, HalRecord) and r.event is HalEvent.KEYFOB_LOST for r in records)
     changes = [r.event for r in records if isinstance(r, RotationRecord)]

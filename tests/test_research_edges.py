@@ -256,9 +256,14 @@ def test_damaged_plans_are_listed_and_every_other_session_goes_on(study: Study, 
 
 def test_a_session_without_a_plan_is_listed_as_damaged(study: Study, tmp_path: Path, capsys) -> None:
     state = copy_of(study, tmp_path)
+    # Records without their plan: a session that began, its plan.json lost since.
     (state / "sessions" / "20990101T000000-X").mkdir()
+    (state / "sessions" / "20990101T000000-X" / "records.jsonl").write_text("")
+    # An empty folder is what a crash left of a session being made: never started, not listed.
+    (state / "sessions" / "20990101T000000-Y").mkdir()
     assert main(["sessions", "--state-dir", str(state)]) == 0
-    assert "damaged: " in capsys.readouterr().out
+    listed = capsys.readouterr().out
+    assert "damaged: " in listed and "000000-X" in listed and "000000-Y" not in listed
 
 
 DAMAGED_RECORDS = [

@@ -35,6 +35,7 @@ from service_fixtures import (
     run_command,
     running_service,
     spoken,
+    status_is,
 )
 
 from kasparctl.game.jsonl import read_records
@@ -94,17 +95,18 @@ def test_keyfob_absent_at_boot_is_shown_and_one_plugged_in_later_starts_the_sess
 
         mark = service.notify.mark()
         os.mkfifo(keys, 0o600)  # plugged in
-        service.notify.wait_for_status(lambda text: text.startswith(IDLE), since=mark)
+        service.notify.wait_for_status(status_is(IDLE), since=mark)
         fd = os.open(keys, os.O_WRONLY | os.O_NONBLOCK)
         try:
             os.write(fd, b"G")  # long green: no restart, no second gesture
         finally:
             os.close(fd)
-        service.notify.wait_for(f"STATUS={PLACING}")
+        service.notify.wait_for_status(status_is(PLACING), since=service.notify.mark())
         assert service.stop() == 0
     events = [r.get("event") for r in events_log(service.state_dir) if r["kind"] == "hal"]
     assert events[:1] == ["keyfob_lost"] and "keyfob_back" in events
-    assert [r["kind"] for r in read_session_records(service.state_dir)][:2] == ["session", "step"]
+    kinds = [r["kind"] for r in read_session_records(service.state_dir)]
+    assert kinds[:3] == ["session", "clock", "step"]  # the clock's state as it started
 
 
 def test_the_real_keyfob_reader_finding_nothing_at_boot_is_shown(tmp_path: Path) -> None:
@@ -212,7 +214,7 @@ def test_an_unusable_sessions_directory_is_a_storage_fault_the_researcher_resume
         # Until a session's record is written, the status still says records may fail.
         service.notify.wait_for_status(lambda t: t.startswith(IDLE), since=mark)
         service.press("G")
-        service.notify.wait_for(f"STATUS={PLACING}")  # written: all well again
+        service.notify.wait_for_status(status_is(PLACING), since=service.notify.mark())  # written: all well again
         assert service.stop() == 0
     faults = [r for r in events_log(state_dir) if r["kind"] == "fault"]
     assert faults[0]["fault"] == "storage" and faults[0]["state"] == "idle"
@@ -294,7 +296,7 @@ def test_reload_answers_reloaded_between_sessions_and_fails_when_refused(tmp_pat
         assert idle.returncode == 0, idle.stderr
         assert idle.stderr.strip() == "kasparctl reload: reloaded"
         service.press("G")
-        service.notify.wait_for(f"STATUS={PLACING}")
+        service.notify.wait_for_status(status_is(PLACING), since=service.notify.mark())
         refused = reload(service.process.pid, runtime)
         assert refused.returncode == 1
         assert refused.stderr.startswith("kasparctl reload: reload refused: a session is running")

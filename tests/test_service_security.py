@@ -20,7 +20,14 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from service_fixtures import DEMO_CONFIG, PHRASES, RunningService, running_service, spoken
+from service_fixtures import (
+    DEMO_CONFIG,
+    PHRASES,
+    RunningService,
+    running_service,
+    spoken,
+    status_is,
+)
 
 from kasparctl.cli import main
 
@@ -135,7 +142,7 @@ def test_the_running_service_listens_on_nothing(service: RunningService) -> None
     # And with a session under way (the researcher's long green starts it), its
     # first step's voice and motion running: Kaspar greets the children.
     service.press("G")
-    service.notify.wait_for("STATUS=step 1: placing the bags")
+    service.notify.wait_for_status(status_is("step 1: placing the bags"), since=service.notify.mark())
     service.stderr.wait_for(lambda line: spoken(line, PHRASES["session"]["greeting"]))
     assert process.poll() is None
     assert listening_sockets(process.pid) == []

@@ -5,7 +5,8 @@ configured joints (as `behaviour check`: a bad file would leave Kaspar still in
 front of the children), pings and reads every configured servo (its
 temperature, voltage, error bits; an impossible reading fails; nothing moves on
 a powered robot), finds the keyfob and the researcher's device (which node, its battery, a press
-within N seconds when asked), and speaks a test line. Each part gives
+within N seconds when asked), speaks a test line, and warns when the wall clock is not
+synchronised. Each part gives
 rows of a table (`kasparctl check` prints it); a configuration or phrase book
 that cannot be read raises its own error first.
 """
@@ -27,6 +28,7 @@ from kasparctl.body.behaviours import BehaviourError, load_library
 from kasparctl.body.check import absent_joints, problems
 from kasparctl.config import Config, load_config, servo_backend_given
 from kasparctl.game.language import phrasebook_for
+from kasparctl.game.wallclock import ClockSource, clock_source
 
 # The voice check's test line: Kaspar's greeting, in the configured language.
 TEST_KEY = "session.greeting"
@@ -44,6 +46,8 @@ class Result:
     part: str
     ok: bool
     detail: str
+    # Ok, but the researcher should know (a clock not synchronised does not stop a session).
+    warning: bool = False
 
 
 @dataclass(frozen=True)
@@ -99,8 +103,25 @@ def _body(config: Config) -> list[Result]:
 
 
 async def _hardware(config: Config, speak: bool) -> list[Result]:
-    checks: list[Callable[[Config, bool], Any]] = [_servos, _voice]
+    checks: list[Callable[[Config, bool], Any]] = [_servos, _voice, _clock]
     return [result for check in checks for result in await check(config, speak)]
+
+
+async def _clock(config: Config, speak: bool) -> list[Result]:
+    return [clock_row(clock_source())]
+
+
+def clock_row(source: ClockSource) -> Result:
+    """The wall clock's row: synchronised, or a warning that record times may be wrong."""
+    if source.synchronised:
+        return Result("clock", True, "synchronised (systemd-timesyncd: NTPSynchronized=yes)")
+    return Result(
+        "clock",
+        True,
+        "NOT synchronised (no systemd-timesyncd, or it has no time server): the records' "
+        "times may be wrong, their order and ages are not; docs/install.md, a good clock",
+        warning=True,
+    )
 
 
 async def _servos(config: Config, speak: bool) -> list[Result]:

@@ -4,7 +4,10 @@ Status is "finished", "stopped" (the researcher's stop gesture),
 "interrupted" (the robot never reached the end: it resumes the most recent
 such session on its next start), "absent" (the group was marked absent in
 idle and never opened; "absent, taken back" once chosen again), or "damaged"
-(it cannot be read: the reason is given). Each session is read in one
+(it cannot be read: the reason is given). A session a crash cost a torn last
+record says so ("recovered"), as does one recorded while the robot's clock was
+not synchronised. Sessions are listed in the order they began on each robot
+(its sequence number, never the wall clock alone). Each session is read in one
 streaming pass, never held whole.
 """
 
@@ -54,6 +57,8 @@ def describe(session: SessionData) -> dict[str, Any]:
         "undone": len(session.index.undone),
         "status": session.status,
         "resumed": session.resumed,
+        "recovered": session.recovered,
+        "clock_synchronised": session.index.clock_synchronised,
         "directory": str(session.directory),
     }
 
@@ -86,6 +91,13 @@ def run(arguments: argparse.Namespace) -> int:
     for line in table:
         cells = (text.ljust(width) for text, width in zip(line, widths, strict=True))
         print("  ".join(cells).rstrip())
+    for row in rows:
+        if row["recovered"]:
+            print(f"recovered: {row['session_name']}: {row['recovered']}")
+    for row in rows:
+        if row["clock_synchronised"] is False:
+            print(f"clock: {row['session_name']}: recorded while the robot's clock was not "
+                  "synchronised: its times may be wrong, its order is not")
     for row in damaged:
         print(f"damaged: {row['reason']}")
     sys.stdout.flush()

@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import msgspec
 import structlog
+from msgspec import UNSET
 from transitions.extensions.asyncio import AsyncMachine
 
 from hal import Hardware
@@ -118,6 +119,7 @@ from kasparctl.game.stages import (
 from kasparctl.game.state import GameState
 from kasparctl.game.steps import Steps
 from kasparctl.game.storage import StorageFailed, remove_tree
+from kasparctl.game.wallclock import ClockWatch, clock_record
 from kasparctl.log import bind_context
 from kasparctl.vocabulary import Command
 
@@ -154,6 +156,9 @@ class Lasting:
     battery: BatteryWatch = field(default_factory=BatteryWatch)
     # The planned sessions the researcher chooses from in idle (None: nothing to choose).
     queue: PlanQueue | None = None
+    # The wall clock watched (the daemon's): its state recorded at each session's start
+    # and each jump; None where nothing watches it (the demo, on a simulated clock).
+    clock: ClockWatch | None = None
 
     @classmethod
     def new(
@@ -161,11 +166,14 @@ class Lasting:
         event_log: EventLog | None,
         open_session: Callable[[], OpenedSession],
         queue: PlanQueue | None = None,
+        clock: ClockWatch | None = None,
     ) -> Lasting:
         """No problems yet; records go to `event_log` while no session is open (with none,
         they are only logged)."""
         problems = Problems()
-        return cls(Recorder(event_log, problems), problems, open_session, queue=queue)
+        return cls(
+            Recorder(event_log, problems), problems, open_session, queue=queue, clock=clock
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -239,6 +247,7 @@ class Game:
         # One keyfob per child ([[keyfob.children]]): whose each seat is, whose turn it is.
         seats = config.keyfob.children
         self.turn = rotation.Turn(tuple(rotation.Seat(s.child - 1, s.where) for s in seats))
+        self._clock = lasting.clock
         self.speech = Speech(self.picker, self.hw.voice, self._record, self._voice_health)
         self.speech.failing = self.problems.get(FaultSource.VOICE)
         self.body = BodyWork(
@@ -355,6 +364,7 @@ class Game:
                 await self._survive(error, "starting the game")
             while self.stage not in ENDS:
                 await self._take(await self._inputs.get())
+                self._record_clock_jump()
             # No more keyfob events taken (they stay queued in the keyfob for the next
             # game); those already taken are still handled.
             await self._inputs.stop_reading()
@@ -372,7 +382,13 @@ class Game:
             session = self._require_session()
             bind_context(session=session.id)
             trials = self._require_state().trials
-            self._record(SessionRecord(event=SessionEvent.RESUMED, step=self.stage, trials=trials))
+            repaired = session.repairs or UNSET
+            self._record(
+                SessionRecord(
+                    event=SessionEvent.RESUMED, step=self.stage, trials=trials, repaired=repaired
+                )
+            )
+            self._record_clock()
             self._emit(GameEvent.RESUMED, step=self.stage)
             await self.speech.announce("session.resumed")
         # What went wrong before the game began stops it before a step starts.
@@ -644,6 +660,7 @@ class Game:
         self._record(
             SessionRecord(event=SessionEvent.RESUMED, step=_resume_step(state), trials=state.trials)
         )
+        self._record_clock()
         self._emit(GameEvent.SESSION, session=opened.session.id)
         # The children may be new to Kaspar today: the greeting first, as at any start.
         await asyncio.gather(self.speech.announce("session.greeting"), self.body.perform(GREETING))
@@ -677,6 +694,7 @@ class Game:
             raise
         self._take_session(opened)
         bind_context(session=session.id)
+        self._record_clock()
         self.problems.set(FaultSource.STORAGE, None)
         self._emit(GameEvent.SESSION, session=session.id)
 
@@ -1023,6 +1041,17 @@ class Game:
 
     def _record(self, record: RecordT) -> RecordT | None:
         return self.recorder.record(record)
+
+    def _record_clock(self) -> None:
+        """The wall clock's state, as a session starts or resumes (game.wallclock)."""
+        if self._clock is not None:
+            self._record(clock_record(self._clock.read()))
+
+    def _record_clock_jump(self) -> None:
+        """The wall clock's state again, when it has jumped since the last reading."""
+        if self._clock is not None and (reading := self._clock.jumped()) is not None:
+            log.warning("the wall clock jumped", step_s=reading.step, source=reading.source.source)
+            self._record(clock_record(reading))
 
     def _change(self, record: RecordT) -> RecordT:
         return self.recorder.change(record, self._require_state(), self.settings)

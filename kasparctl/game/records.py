@@ -130,6 +130,9 @@ class SessionRecord(Record, tag="session", kw_only=True, frozen=True):
     # session could not be resumed, and the step it had reached ("unknown" if unreadable).
     reason: str | UnsetType = UNSET
     state: str | UnsetType = UNSET
+    # resumed: what the resume found and repaired (a torn last line moved aside), one
+    # line each; absent when it found nothing.
+    repaired: list[str] | UnsetType = UNSET
 
 
 class CommandRecord(Record, tag="command", kw_only=True, frozen=True):
@@ -408,6 +411,24 @@ class RotationRecord(Record, tag="rotation", kw_only=True, frozen=True):
     seat: int | UnsetType = UNSET
 
 
+class ClockRecord(Record, tag="clock", kw_only=True, frozen=True):
+    """The wall clock's state (kasparctl.game.wallclock): at the session's start or resume,
+    and whenever the daemon saw the wall clock jump against the monotonic one.
+
+    `synchronised` whether it can be trusted (systemd-timesyncd says NTPSynchronized),
+    `source` "timesyncd" or "unsynchronised"; `offset` the wall clock minus the
+    monotonic one (s) and `step` how far that moved since the last reading (0.0 at a
+    start); `boot` the kernel's boot id, the monotonic clock's reference. History only:
+    every order and age is taken from seq and `clock`, never from `time`.
+    """
+
+    synchronised: bool
+    source: str
+    offset: float
+    step: float
+    boot: str = ""
+
+
 AnyRecord = (
     SessionRecord
     | CommandRecord
@@ -425,6 +446,7 @@ AnyRecord = (
     | AlertRecord
     | RotationRecord
     | ButtonCheckRecord
+    | ClockRecord
 )
 
 # Records that change GameState when applied; every other kind is history only.

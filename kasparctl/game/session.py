@@ -49,9 +49,11 @@ from kasparctl.game.state import GameState, StateError
 from kasparctl.game.storage import (
     RecordLog,
     SessionError,
+    create_empty,
     make_directory,
     remove_tree,
     rename,
+    rename_new,
     storage_failed,
     write_atomic,
 )
@@ -64,6 +66,8 @@ STATE_FILE = "state.json"
 RECORDS_FILE = "records.jsonl"
 EVENTS_FILE = "events.jsonl"
 DAMAGED_SUFFIX = ".damaged"
+# A session is built under this name (".<id>.new") and renamed into place once whole.
+BUILDING_SUFFIX = ".new"
 
 _encoder = msgspec.json.Encoder()
 RecordT = TypeVar("RecordT", bound=Record)
@@ -185,6 +189,8 @@ class Session:
         self.plan = plan
         self.id: str = plan["session"]
         self.last_seq = last_seq
+        # What opening it found and repaired (Session.open), one line each: said, not silent.
+        self.repairs: list[str] = []
         self._log = RecordLog(directory / RECORDS_FILE, recreate=self._recreate_directory)
 
     def _recreate_directory(self) -> None:
@@ -207,11 +213,19 @@ class Session:
 
         The directory's name (its start time and group) is readable but not unique
         across robots or state directories; plan.json also holds `uid`, a ULID no
-        other session anywhere has, and `robot`, the robot's id (`robot`, else the
-        plan's, else kasparctl.config.default_robot_id()).
+        other session anywhere has, `robot`, the robot's id (`robot`, else the
+        plan's, else kasparctl.config.default_robot_id()), and `sequence`, its place
+        among the state directory's sessions (the wall clock may be wrong: see
+        session_order).
+
+        The session is built under a hidden name (plan.json and an empty records.jsonl,
+        both durable) and renamed into sessions/ in one step, so no reader ever sees it
+        half made; what a crash left of an earlier one is removed here first.
         """
         sessions = _sessions_dir(state_dir)
+        remove_never_started(sessions)
         now = now or dt.datetime.now(dt.UTC)
+        sequence, last_uid = last_session(sessions)
         stamp = now.strftime("%Y%m%dT%H%M%S")
         base = f"{stamp}-{_safe_name(plan['group'])}"
         session_id, suffix = base, 1
@@ -219,22 +233,26 @@ class Session:
             suffix += 1
             session_id = f"{base}-{suffix}"
         directory = sessions / session_id
+        building = sessions / f".{session_id}{BUILDING_SUFFIX}"
+        full_plan = {
+            "session": session_id,
+            "uid": new_ulid(now, after=last_uid),
+            "robot": robot or plan.get("robot") or default_robot_id(),
+            "created": utc_now(),
+            "sequence": sequence + 1,
+            **plan,
+        }
         try:
-            make_directory(directory)
+            make_directory(building)
         except OSError as error:
             raise storage_failed(directory, "cannot create the session", error) from error
         try:
-            full_plan = {
-                "session": session_id,
-                "uid": new_ulid(now),
-                "robot": robot or plan.get("robot") or default_robot_id(),
-                "created": utc_now(),
-                **plan,
-            }
-            write_atomic(directory / PLAN_FILE, _encoder.encode(full_plan))
+            write_atomic(building / PLAN_FILE, _encoder.encode(full_plan))
+            create_empty(building / RECORDS_FILE)
+            rename_new(building, directory)
         except OSError as error:
-            # No half-made session left behind: a directory without its plan is no session.
-            remove_tree(directory)
+            # No half-made session left behind: it was never in sessions/ by its name.
+            remove_tree(building)
             raise storage_failed(directory, "cannot create the session", error) from error
         return cls(directory, full_plan, last_seq=0)
 
@@ -250,7 +268,11 @@ class Session:
             log.warning("session records repaired", detail=warning)
         # Every line that is JSON counts, a record or not: its seq is never given again.
         last_seq = max((line_seq(record) for record in read.records), default=0)
-        return cls(directory, plan, last_seq), read.warnings
+        session = cls(directory, plan, last_seq)
+        session.repairs = [
+            warning.removeprefix(f"{directory}/") for warning in read.warnings
+        ]
+        return session, read.warnings
 
     # -- state ----------------------------------------------------------------
 
@@ -388,15 +410,29 @@ class EventLog:
 _CROCKFORD = "0123456789ABCDEFGHJKMNPQRSTVWXYZ"
 
 
-def new_ulid(now: dt.datetime) -> str:
+def new_ulid(now: dt.datetime, after: str | None = None) -> str:
     """A ULID: 48 bits of milliseconds since 1970, then 80 random bits, in 26 characters.
 
-    Sorts by time like the readable id, and two sessions never share one (even started
-    in the same millisecond on two robots: 2^80 random values).
+    Two sessions never share one (even started in the same millisecond on two robots:
+    2^80 random values). Its milliseconds are past those of `after` (the state
+    directory's last session's ULID), so a state directory's ULIDs sort in the order
+    its sessions began even when the wall clock stepped back between them.
     """
     milliseconds = int(now.timestamp() * 1000) & ((1 << 48) - 1)
+    if after is not None and (previous := ulid_milliseconds(after)) is not None:
+        milliseconds = max(milliseconds, previous + 1) & ((1 << 48) - 1)
     value = (milliseconds << 80) | int.from_bytes(secrets.token_bytes(10), "big")
     return "".join(_CROCKFORD[(value >> shift) & 31] for shift in range(125, -1, -5))
+
+
+def ulid_milliseconds(ulid: str) -> int | None:
+    """The milliseconds a ULID begins with; None when it is not one."""
+    if len(ulid) != 26 or any(c not in _CROCKFORD for c in ulid.upper()):
+        return None
+    value = 0
+    for character in ulid.upper():
+        value = value * 32 + _CROCKFORD.index(character)
+    return value >> 80
 
 
 def _sessions_dir(state_dir: Path) -> Path:
@@ -419,10 +455,73 @@ def _safe_name(text: str) -> str:
 
 
 def session_dirs(state_dir: Path) -> Iterator[Path]:
-    """Every session directory, oldest first (ids start with their UTC start time)."""
+    """Every session directory, oldest first: in the order they began (session_order)."""
     sessions = state_dir / "sessions"
     if sessions.is_dir():
-        yield from sorted(p for p in sessions.iterdir() if (p / PLAN_FILE).is_file())
+        found = [
+            p
+            for p in sessions.iterdir()
+            if not p.name.startswith(".") and (p / PLAN_FILE).is_file()
+        ]
+        yield from sorted(found, key=session_order)
+
+
+def plan_sequence(plan: Any) -> int:
+    """A plan's `sequence`; 0 for a session from before sessions were numbered."""
+    sequence = plan.get("sequence", 0) if isinstance(plan, dict) else 0
+    return sequence if isinstance(sequence, int) and not isinstance(sequence, bool) else 0
+
+
+def session_order(directory: Path) -> tuple[int, str]:
+    """Where a session stands among its state directory's: its plan's sequence number, then
+    its name (a start time, which orders only the sessions from before the numbers).
+
+    Never the wall clock alone: a robot without a real-time clock may start a session
+    hours or years behind the one before it.
+    """
+    try:
+        plan = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
+    except (OSError, *UNDECODABLE):
+        plan = None
+    return plan_sequence(plan), directory.name
+
+
+def last_session(sessions: Path) -> tuple[int, str | None]:
+    """The highest sequence number among the sessions in `sessions`, and the latest uid."""
+    sequence, uids = 0, []
+    for directory in sessions.iterdir():
+        if directory.name.startswith("."):
+            continue
+        try:
+            plan = msgspec.json.decode((directory / PLAN_FILE).read_bytes())
+        except (OSError, *UNDECODABLE):
+            continue
+        sequence = max(sequence, plan_sequence(plan))
+        uid = plan.get("uid") if isinstance(plan, dict) else None
+        if isinstance(uid, str) and ulid_milliseconds(uid) is not None:
+            uids.append(uid.upper())
+    return sequence, max(uids, default=None)
+
+
+def never_started(directory: Path) -> bool:
+    """Whether a folder of sessions/ is what a crash left of a session being made: one
+    still under its building name, or (made before sessions were built aside) a folder
+    holding no plan.json and nothing but the plan's temporary file."""
+    if directory.name.startswith(".") and directory.name.endswith(BUILDING_SUFFIX):
+        return True
+    try:
+        names = {entry.name for entry in directory.iterdir()}
+    except OSError:
+        return False
+    return names <= {f".{PLAN_FILE}.tmp"}
+
+
+def remove_never_started(sessions: Path) -> None:
+    """Remove what crashes left of sessions being made (never_started): the writer's job."""
+    for directory in sessions.iterdir():
+        if directory.is_dir() and never_started(directory):
+            log.warning("removed a session a crash left half made", directory=str(directory))
+            remove_tree(directory)
 
 
 def is_finished(directory: Path) -> bool:

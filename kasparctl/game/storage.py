@@ -5,6 +5,13 @@ this module: a file replaced atomically (write_atomic), bytes appended and
 fsynced (append_durably, RecordLog), a file cut back (truncate), a private
 directory made (make_directory), a file renamed (rename), a directory's entries
 made durable (fsync_directory), a half-made session removed (remove_tree).
+
+Under POSIX a new name (a directory made, a file created, a rename) survives a
+power cut only once its directory is fsynced, and a file's bytes only once the
+file is: so every function here returns with both durable, the entry of each
+directory it makes or fills included. Every change goes through this module's
+`os`, so a test can record the operations and explore the states a crash may
+leave (tests/crash_states.py).
 What goes into the files is kasparctl.game.jsonl's and kasparctl.game.session's;
 an OSError here becomes StorageFailed there, naming the file and the reason.
 """
@@ -14,7 +21,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
-import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -66,33 +72,99 @@ def write_atomic(path: Path, data: bytes) -> None:
 
 
 def append_durably(path: Path, data: bytes) -> None:
-    """Append `data` to `path` (made private if new) and fsync it before returning."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, PRIVATE_FILE)
+    """Append `data` to `path` (made private if new) and fsync it before returning;
+    a file made here has its directory entry made durable too."""
+    fd, created = _open_appending(path, os.O_WRONLY)
     try:
         _write_all(fd, data)
         os.fsync(fd)
     finally:
         os.close(fd)
+    if created:
+        fsync_directory(path.parent)
+
+
+def create_empty(path: Path) -> None:
+    """Make the empty private file `path` (kept if there), its entry durable."""
+    fd, _created = _open_appending(path, os.O_WRONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    fsync_directory(path.parent)
+
+
+def _open_appending(path: Path, access: int) -> tuple[int, bool]:
+    """`path` opened for appending, made private if new; and whether it was made now."""
+    try:
+        return os.open(path, access | os.O_CREAT | os.O_EXCL | os.O_APPEND, PRIVATE_FILE), True
+    except FileExistsError:
+        return os.open(path, access | os.O_APPEND), False
 
 
 def truncate(path: Path, size: int) -> None:
-    """Cut the file at `path` back to its first `size` bytes."""
-    os.truncate(path, size)
+    """Cut the file at `path` back to its first `size` bytes, durably."""
+    fd = os.open(path, os.O_WRONLY)
+    try:
+        os.ftruncate(fd, size)
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def rename(source: Path, target: Path) -> None:
-    """Move `source` to `target`, replacing what was there."""
+    """Move `source` to `target`, replacing what was there; durable on return."""
     os.replace(source, target)
+    fsync_directory(target.parent)
+    if source.parent != target.parent:
+        fsync_directory(source.parent)
+
+
+def rename_new(source: Path, target: Path) -> None:
+    """Move the directory `source` to `target`, which must not exist (FileExistsError, or
+    OSError ENOTEMPTY); one rename, so a reader sees it whole or not at all."""
+    if os.path.lexists(target):
+        raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(target))
+    os.rename(source, target)
+    fsync_directory(target.parent)
 
 
 def make_directory(path: Path, *, parents: bool = False, exist_ok: bool = False) -> None:
-    """Make the private directory `path` (Path.mkdir's `parents` and `exist_ok`)."""
-    path.mkdir(mode=PRIVATE_DIR, parents=parents, exist_ok=exist_ok)
+    """Make the private directory `path` (Path.mkdir's `parents` and `exist_ok`), its entry
+    and those of any parent made durable: a directory found there is made durable too,
+    since a crash may have come between its mkdir and its parent's fsync."""
+    missing: list[Path] = []
+    here = path
+    while parents and not os.path.isdir(here.parent) and here.parent != here:
+        here = here.parent
+        missing.append(here)
+    for directory in reversed(missing):
+        _mkdir(directory, exist_ok=True)
+    _mkdir(path, exist_ok=exist_ok)
+
+
+def _mkdir(path: Path, *, exist_ok: bool) -> None:
+    try:
+        os.mkdir(path, PRIVATE_DIR)
+    except FileExistsError:
+        if not exist_ok or not os.path.isdir(path):
+            raise
+    fsync_directory(path.parent)
 
 
 def remove_tree(directory: Path) -> None:
-    """Remove `directory` and all it holds, as far as it can be."""
-    shutil.rmtree(directory, ignore_errors=True)
+    """Remove `directory` and all it holds, as far as it can be; its removal made durable."""
+    for root, folders, files in os.walk(directory, topdown=False):
+        for name in files:
+            with contextlib.suppress(OSError):
+                os.unlink(os.path.join(root, name))
+        for name in folders:
+            with contextlib.suppress(OSError):
+                os.rmdir(os.path.join(root, name))
+    with contextlib.suppress(OSError):
+        os.rmdir(directory)
+    with contextlib.suppress(OSError):
+        fsync_directory(directory.parent)
 
 
 def _write_all(fd: int, data: bytes) -> None:
@@ -132,7 +204,10 @@ class RecordLog:
 
     def _open(self) -> None:
         # Read as well as write: a removed file is written back from this descriptor.
-        self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_APPEND, PRIVATE_FILE)
+        self._fd, created = _open_appending(self.path, os.O_RDWR)
+        if created:
+            # The log's first record is durable only once the log's name is.
+            fsync_directory(self.path.parent)
 
     def _make_directory(self) -> None:
         make_directory(self.path.parent, parents=True, exist_ok=True)

@@ -24,15 +24,17 @@ import msgspec
 
 from hal.errors import KasparError
 from kasparctl.config import CONDITION_LABELS, SPOKEN_MODES
+from kasparctl.game.jsonl import TORN_SUFFIX
 from kasparctl.game.records import (
     AnyRecord,
+    ClockRecord,
     SessionEvent,
     SessionRecord,
     StepRecord,
     TrialRecord,
     UndoRecord,
 )
-from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
+from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, never_started
 from kasparctl.research.reader import Warnings, is_utf8, iter_records
 
 # plan.json is a few hundred bytes; one far larger is not a plan, and is not read whole.
@@ -67,6 +69,8 @@ class PlanFile(msgspec.Struct, kw_only=True, frozen=True):
     uid: str | None = None
     robot: str | None = None
     created: str = ""
+    # Its place among its state directory's sessions; 0 before sessions were numbered.
+    sequence: int = 0
     group: str | None = None
     condition: str | None = None
     variant: str = ""
@@ -105,6 +109,9 @@ class SessionIndex:
     # back; None for every session that was opened.
     absent: bool | None = None
     warnings: list[str] = field(default_factory=list)
+    # Whether the wall clock was synchronised at every clock record (game.wallclock);
+    # None for a session without one (older, or the demo's simulated clock).
+    clock_synchronised: bool | None = None
 
     @property
     def trials(self) -> int:
@@ -283,6 +290,25 @@ class SessionData:
         """How many times the robot carried this session on after a crash or restart."""
         return self.index.resumed
 
+    @property
+    def recovered(self) -> str | None:
+        """What a crash cost the session, found when it was resumed or read: a torn last
+        record (never fsynced, so never reacted to), kept aside; None when nothing."""
+        torn = self.directory / f"{RECORDS_FILE}{TORN_SUFFIX}"
+        try:
+            size = torn.stat().st_size
+        except OSError:
+            size = 0
+        pending = [w for w in self.index.warnings if "the last line was torn" in w]
+        if size:
+            return (
+                f"a crash tore its last record ({size} bytes, never fsynced: "
+                f"kept in {torn.name}); nothing saved was lost"
+            )
+        if pending:
+            return "a crash tore its last record (never fsynced); repaired when it resumes"
+        return None
+
     def first_names(self) -> dict[str, str]:
         """Each first name in the plan and the pseudonym that replaces it ("child 2")."""
         return {name: f"child {index + 1}" for index, name in enumerate(self.children) if name}
@@ -413,6 +439,8 @@ def index_session(directory: Path) -> SessionIndex:
             SessionEvent.PRESENT,
         ):
             index.absent = record.event is SessionEvent.ABSENT
+        elif isinstance(record, ClockRecord):
+            index.clock_synchronised = record.synchronised and index.clock_synchronised is not False
     if not toys:
         # Failing a full guess, positions are named from the choices.
         toys = tuple(chosen.get(i, f"toy {i + 1}") for i in range(width))
@@ -456,13 +484,18 @@ def session_dirs(state_dir: Path) -> list[Path]:
     """Every session directory of a state directory, by name (their start time).
 
     A directory without a plan.json is listed too (it is a damaged session, and
-    says why); CatalogueError when the state directory cannot be listed.
+    says why), but not what a crash left of a session being made (never started:
+    game.session.never_started); CatalogueError when the state directory cannot be listed.
     """
     sessions = state_dir / "sessions"
     try:
         if not sessions.is_dir():
             return []
-        return sorted(p for p in sessions.iterdir() if p.is_dir() and not p.name.startswith("."))
+        return sorted(
+            p
+            for p in sessions.iterdir()
+            if p.is_dir() and not p.name.startswith(".") and not never_started(p)
+        )
     except PermissionError:
         raise CatalogueError(
             f"{sessions}: permission denied (the state directory is private to the robot's "
@@ -554,6 +587,9 @@ def open_sessions(directories: Iterable[Path]) -> Catalogue:
             continue
         seen[opened.uid] = directory
         catalogue.sessions.append(opened)
-    # Readable ids start with their UTC start time: by it, then by group, then by uid.
-    catalogue.sessions.sort(key=lambda s: (s.name, s.created, s.uid))
+    # Each state directory's in the order they began: its sequence number (the wall clock
+    # may have been wrong), then the readable id (its UTC start time), then the uid.
+    catalogue.sessions.sort(
+        key=lambda s: (str(s.directory.parent), s.meta.sequence, s.name, s.created, s.uid)
+    )
     return catalogue

@@ -132,6 +132,7 @@ def trial_header(toys: dict[str, str], participants: Participants = NO_PARTICIPA
         "confused",
         "reopened",
         "time",
+        "clock_synchronised",
     ]
 
 
@@ -197,6 +198,8 @@ def trial_rows(
             "confused": guess.confused,
             "reopened": guess.reopened,
             "time": trial.time,
+            # Whether `time` can be trusted: the robot's wall clock synchronised all session.
+            "clock_synchronised": session.index.clock_synchronised,
         }
         for prefix, values in _per_toy(trial):
             for toy, value in zip(session.toys, values, strict=False):

@@ -69,6 +69,7 @@ from kasparctl.game.resume import (
 from kasparctl.game.session import RECORDS_FILE, EventLog, is_finished, session_dirs
 from kasparctl.game.stages import ENDS
 from kasparctl.game.storage import StorageFailed
+from kasparctl.game.wallclock import ClockWatch
 from kasparctl.log import configure_logging
 from kasparctl.service.batteries import low_batteries
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
@@ -140,7 +141,9 @@ class Daemon:
         # What outlives each game: the records the disk refused, and what is not working.
         # The planned sessions, and the researcher's choice among them in idle.
         self.queue = PlanQueue(self._state_dir, lambda: self.config)
-        self.lasting = Lasting.new(self.events, self._open_session, self.queue)
+        self.lasting = Lasting.new(
+            self.events, self._open_session, self.queue, ClockWatch()
+        )
         self.lock = StateDirLock(self._state_dir)
         self._stopping = asyncio.Event()
         self._stop_reason = ""
@@ -417,7 +420,11 @@ class Daemon:
                 waiting = self.queue.words()
         notices = " | ".join(n for n in (self._notice, self._batteries) if n) or None
         battery = battery_words(self.hw.servos.battery() if self.hw is not None else None)
-        return status_line(game.stage, game.problems, notices, confused, battery, waiting)
+        clock = self.lasting.clock.last if self.lasting.clock is not None else None
+        unsynchronised = clock is not None and not clock.source.synchronised
+        return status_line(
+            game.stage, game.problems, notices, confused, battery, waiting, unsynchronised
+        )
 
     def _on_game_event(self, event: GameEvent, info: dict[str, Any]) -> None:
         game = self.game
@@ -467,6 +474,11 @@ class Daemon:
             return None
         session, state = resumable.session, resumable.state
         log.info("resuming session", session=session.id, step=state.step, trials=state.trials)
+        if session.repairs:
+            # A crash tore the last record (never fsynced, so never reacted to): said.
+            self._notice = f"session {session.id} resumed after a crash: " + "; ".join(
+                session.repairs
+            )
         return OpenedSession(session, resumable.plan, state)
 
     def _note_abandoned(self, abandoned: Abandoned, clock: float) -> None:

@@ -49,6 +49,8 @@ STORAGE_ADVICE = (
 # systemd keeps STATUS= whole, but a line this long is still read at a glance.
 DETAIL_LIMIT = 200
 STATUS_LIMIT = 600
+# Said while the wall clock is not synchronised (kasparctl.game.wallclock; docs/install.md).
+CLOCK_WORDS = "clock unsynchronised: record times may be wrong (order and ages are not)"
 
 
 def status_line(
@@ -58,11 +60,12 @@ def status_line(
     confused: str | None = None,
     battery: str | None = None,
     waiting: str | None = None,
+    clock_unsynchronised: bool = False,
 ) -> str:
     """The STATUS= text for `stage` with `problems` (part -> why), each reason cut to a limit,
     and a `notice` (a session abandoned); `confused` (recovery_words) after the stage;
-    `battery` (battery_words) at the end; `waiting`, in idle, what "next" would start
-    (kasparctl.game.opening.PlanQueue.words)."""
+    CLOCK_WORDS when `clock_unsynchronised`; `battery` (battery_words) at the end;
+    `waiting`, in idle, what "next" would start (kasparctl.game.opening.PlanQueue.words)."""
     words = waiting if stage == "idle" and waiting else STATUS_WORDS.get(stage, stage)
     if confused:
         words = f"{words} | {confused}"
@@ -73,6 +76,8 @@ def status_line(
     ]
     if notice:
         parts.append(_cut(notice, DETAIL_LIMIT))
+    if clock_unsynchronised:
+        parts.append(CLOCK_WORDS)
     line = _cut(" | ".join([words, *parts]), STATUS_LIMIT - len(battery or "") - 3)
     return f"{line} | {battery}" if battery else line
 

@@ -55,6 +55,7 @@ from kasparctl.game.records import (
 from kasparctl.game.resume import Abandoned, resume_or_abandon
 from kasparctl.game.session import EventLog
 from kasparctl.game.stages import ENDS
+from kasparctl.game.wallclock import ClockWatch
 from kasparctl.sim import simtime
 from kasparctl.sim.children import (
     MAX_RESUMES,
@@ -167,6 +168,9 @@ class DemoOptions:
     voice: str | None = None
     # The researcher's pauses, undos and stops at any moment, open questions included.
     interruptions: Interruptions = field(default_factory=Interruptions)
+    # The wall clock watched, its state recorded as the service records it (None: not
+    # watched, as the demo's clock is simulated; a test injects one).
+    clock: ClockWatch | None = None
 
 
 @dataclass
@@ -402,7 +406,9 @@ def assemble(
         # Seeded like everything else in the demo: blinks at the same moments, the same game.
         body = make_body(config, servos, voice, rng=random.Random(options.seed))
     game = Game(
-        Setup(config, hardware, picker, body), Lasting.new(events, open_session), Start(resumed)
+        Setup(config, hardware, picker, body),
+        Lasting.new(events, open_session, clock=options.clock),
+        Start(resumed),
     )
     children = None
     if not options.interactive:

@@ -33,6 +33,7 @@ from kasparctl.game.fold import Confusion, Facts, Guess, Reading
 from kasparctl.game.records import (
     AlertRecord,
     AnyRecord,
+    ClockRecord,
     CommandRecord,
     Confirmation,
     FaultRecord,
@@ -138,16 +139,22 @@ class SessionFold:
         max_trials_per_target, if known (the records do not say it)."""
         self.view = _identity(plan or {})
         self.reading = Reading(limit)
+        self._runs = 0
 
     def apply(self, record: AnyRecord) -> None:
         """Move the view on by the next record."""
         guess = self.reading.apply(record)
         view = self.view
+        if isinstance(record, SessionRecord) and record.event in _NEW_RUN:
+            # A new run of the daemon: its monotonic clock is another's.
+            self._runs += 1
+            view = replace(view, run=f"run {self._runs}", boot="")
         view = replace(
             view,
             records=view.records + 1,
             last_seq=max(view.last_seq, record.seq),
             last_time=record.time or view.last_time,
+            last_clock=record.clock,
             # Anything recorded after a shutdown means the daemon is back.
             shutdown=None,
         )
@@ -271,7 +278,9 @@ def _on_fault(view: SessionView, record: FaultRecord) -> SessionView:
     # Written with its joint (null for parts that have none) only when the game stopped for it.
     stops = record.joint is not UNSET and record.state not in ENDS
     joint = record.joint if isinstance(record.joint, str) else None
-    seen = FaultSeen(record.time, str(record.fault), record.detail, joint, stops, stops)
+    seen = FaultSeen(
+        record.time, str(record.fault), record.detail, joint, stops, stops, record.clock, view.run
+    )
     stage = "fault" if stops else view.stage
     return replace(view, faults=(*view.faults, seen), stage=stage)
 
@@ -293,13 +302,14 @@ def _on_hal(view: SessionView, record: HalRecord) -> SessionView:
     if record.event is HalEvent.RESEARCHER_LOST:
         # Nothing stops for it: the researcher's holds on the children's keyfob meanwhile.
         reason = record.reason if isinstance(record.reason, str) else "lost"
-        return replace(view, faults=(*view.faults, FaultSeen(record.time, "researcher", reason)))
+        seen = FaultSeen(record.time, "researcher", reason, clock=record.clock, run=view.run)
+        return replace(view, faults=(*view.faults, seen))
     status = record.status if isinstance(record.status, str) else "failed"
     said = record.text if isinstance(record.text, str) else ""
     detail = f"line not heard ({status}): {said}" if said else f"line not heard ({status})"
     if isinstance(record.error, str):
         detail += f"; {record.error}"
-    seen = FaultSeen(record.time, "voice", detail)
+    seen = FaultSeen(record.time, "voice", detail, clock=record.clock, run=view.run)
     return replace(view, faults=(*view.faults, seen))
 
 
@@ -440,6 +450,10 @@ def _on_alert(view: SessionView, record: AlertRecord) -> SessionView:
     return replace(view, alerts=(*view.alerts, line))
 
 
+def _on_clock(view: SessionView, record: ClockRecord) -> SessionView:
+    return replace(view, boot=record.boot, clock_synchronised=record.synchronised)
+
+
 def _on_undo(view: SessionView, record: UndoRecord) -> SessionView:
     answers = tuple(
         replace(answer, undone=True) if answer.trial == record.trial else answer
@@ -464,4 +478,7 @@ _HANDLERS: dict[type, Any] = {
     UndoRecord: _on_undo,
     ReopenRecord: _on_reopen,
     AlertRecord: _on_alert,
+    ClockRecord: _on_clock,
 }
+# The records that begin a run of the daemon in a session.
+_NEW_RUN = (SessionEvent.START, SessionEvent.RESUMED)

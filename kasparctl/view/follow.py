@@ -5,9 +5,12 @@ folder), the sessions folder (a session starting) and each session's folder
 (its records.jsonl growing, or cut back to its last whole line when a resumed
 daemon repairs a torn one). A directory that does not exist yet is waited for
 by watching the nearest one that does. The session followed is the one being
-written: the newest at the start, then whichever one a write lands in, so a
-new session and a resumed older one are both followed without a rule of ours
-to guess which the daemon picks.
+written: the last begun at the start (by the state directory's sequence number,
+game.session.session_order, never by a file's time: the robot's wall clock may
+be hours or years off), then whichever one a write lands in, so a new session
+and a resumed older one are both followed without a rule of ours to guess which
+the daemon picks. A session still being made (under its hidden building name)
+is not one yet.
 
 Read-only: files are read with the game's own readers (torn and damaged lines
 are left out with a warning, never repaired from here), and a file is read
@@ -27,7 +30,7 @@ import msgspec
 from kasparctl.game.jsonl import read_json_lines, read_records
 from kasparctl.game.lock import lock_holder
 from kasparctl.game.opening import is_absence
-from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
+from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, session_order
 from kasparctl.view.fold import SessionFold, daemon_events
 from kasparctl.view.inotify import (
     IN_CREATE,
@@ -216,7 +219,11 @@ class Follower:
     @staticmethod
     def _folders(directory: Path) -> list[Path]:
         try:
-            return sorted(path for path in directory.iterdir() if path.is_dir())
+            return sorted(
+                path
+                for path in directory.iterdir()
+                if path.is_dir() and not path.name.startswith(".")
+            )
         except OSError:
             return []
 
@@ -229,17 +236,8 @@ class Follower:
 
     @staticmethod
     def _newest(directories: list[Path]) -> Path | None:
-        """The session written last (its records, else its plan)."""
-
-        def written(directory: Path) -> float:
-            for name in _SESSION_FILES:
-                try:
-                    return (directory / name).stat().st_mtime
-                except OSError:
-                    continue
-            return 0.0
-
-        return max(directories, key=lambda d: (written(d), d.name), default=None)
+        """The session begun last: the highest sequence number (then the latest name)."""
+        return max(directories, key=session_order, default=None)
 
     # -- events -----------------------------------------------------------------
 

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from kasparctl.view.ages import ago, clock_time, next_change
+from kasparctl.view.ages import Now, Stamp, ago, clock_time, next_change
 from kasparctl.view.model import (
     Answer,
     CommandSeen,
@@ -28,6 +28,9 @@ from kasparctl.view.model import (
     WatchView,
     step_number,
 )
+
+# Shown while the session's last clock record says the wall clock is not synchronised.
+CLOCK_WARNING = "unsynchronised: the times shown may be wrong (the ages and order are not)"
 
 Style = Literal[
     "",
@@ -89,18 +92,28 @@ def plain_text(line: Line) -> str:
     return "".join(text for text, _ in line)
 
 
-def shown_times(view: WatchView) -> list[str]:
+def shown_times(view: WatchView) -> list[Stamp]:
     """The times the frame shows as "ago": when one changes, the frame must be drawn again."""
-    times = [event.time for event in view.daemon[-3:]]
+    times = [Stamp(event.time) for event in view.daemon[-3:]]
     session = view.session
     if session is not None:
-        times += [fault.time for fault in session.faults[-4:]]
+        times += [fault_stamp(fault) for fault in session.faults[-4:]]
         if session.last_time:
-            times.append(session.last_time)
+            times.append(last_stamp(session))
     return times
 
 
-def seconds_to_redraw(view: WatchView, now: dt.datetime) -> float | None:
+def fault_stamp(fault: FaultSeen) -> Stamp:
+    """When a fault was recorded, on both clocks."""
+    return Stamp(fault.time, fault.clock, fault.run)
+
+
+def last_stamp(session: SessionView) -> Stamp:
+    """When the session's last record was written, on both clocks."""
+    return Stamp(session.last_time, session.last_clock, session.run)
+
+
+def seconds_to_redraw(view: WatchView, now: Now | dt.datetime) -> float | None:
     """How long the frame stays right as time passes; None while nothing on it ages."""
     waits = [w for w in (next_change(t, now) for t in shown_times(view)) if w is not None]
     return min(waits) if waits else None
@@ -167,7 +180,7 @@ def _bar(fraction: float, width: int, glyphs: Glyphs) -> tuple[str, str]:
     return filled, glyphs.trough * (width - len(filled))
 
 
-def _header(view: WatchView, now: dt.datetime, width: int, glyphs: Glyphs) -> list[Line]:
+def _header(view: WatchView, now: Now | dt.datetime, width: int, glyphs: Glyphs) -> list[Line]:
     session = view.session
     first = _Row(width).add("Kaspar ", "title")
     if session is None:
@@ -204,8 +217,10 @@ def _header(view: WatchView, now: dt.datetime, width: int, glyphs: Glyphs) -> li
     lines = [first.line(), second.line(), _daemon_row(view, session, now, width).line()]
     for fault in session.pending_faults[-2:]:
         what = f"{fault.source} {fault.joint}" if fault.joint else fault.source
-        row = _Row(width).add(f"FAULT {what}", "bad").add(f" {ago(fault.time, now)}", "dim")
+        row = _Row(width).add(f"FAULT {what}", "bad").add(f" {ago(fault_stamp(fault), now)}", "dim")
         lines.append(row.add(f": {fault.detail}").line())
+    if session.clock_synchronised is False:
+        lines.append(_Row(width).add("CLOCK ", "warn").add(CLOCK_WARNING).line())
     if session.confused is not None and not session.ended:
         lines.append(_Row(width).add("CONFUSED ", "warn").add(session.confused).line())
     for alert in session.alerts[-2:]:
@@ -228,7 +243,9 @@ def _targets(session: SessionView) -> int | None:
     return len(session.toys) if session.variant == "names" and session.toys else None
 
 
-def _daemon_row(view: WatchView, session: SessionView | None, now: dt.datetime, width: int) -> _Row:
+def _daemon_row(
+    view: WatchView, session: SessionView | None, now: Now | dt.datetime, width: int
+) -> _Row:
     row = _Row(width).add("daemon ", "dim")
     if view.writer is not None:
         row.add(f"running (pid {view.writer})", "good")
@@ -248,7 +265,8 @@ def _daemon_row(view: WatchView, session: SessionView | None, now: dt.datetime, 
         row.add("  battery ", "dim").add(session.battery, "warn" if session.battery_low else "good")
     if session is not None and session.last_time:
         row.right(
-            f"last record {clock_time(session.last_time)}, {ago(session.last_time, now)}", "dim"
+            f"last record {clock_time(session.last_time)}, {ago(last_stamp(session), now)}",
+            "dim",
         )
     return row
 
@@ -433,9 +451,9 @@ def _command_row(command: CommandSeen, width: int, glyphs: Glyphs) -> _Row:
     return row
 
 
-def _fault_row(fault: FaultSeen, now: dt.datetime, width: int) -> _Row:
+def _fault_row(fault: FaultSeen, now: Now | dt.datetime, width: int) -> _Row:
     """When, what and why; a pending one (the game waits for a resume) marked "now"."""
-    row = _Row(width).add(f"{ago(fault.time, now)} ", "dim")
+    row = _Row(width).add(f"{ago(fault_stamp(fault), now)} ", "dim")
     what = f"{fault.source} {fault.joint}" if fault.joint else fault.source
     row.add(what, "bad" if fault.pending else "warn")
     if fault.pending:
@@ -443,7 +461,7 @@ def _fault_row(fault: FaultSeen, now: dt.datetime, width: int) -> _Row:
     return row.add(f": {fault.detail}")
 
 
-def _daemon_event_row(event: DaemonEvent, now: dt.datetime, width: int) -> _Row:
+def _daemon_event_row(event: DaemonEvent, now: Now | dt.datetime, width: int) -> _Row:
     """An event of the daemon's own log, in the faults' form."""
     row = _Row(width).add(f"{ago(event.time, now)} ", "dim").add("daemon ", "dim")
     row.add(event.name, "bad" if event.fault else "")
@@ -464,7 +482,12 @@ def _columns(left: list[Line], right: list[Line], width: int, split: int) -> lis
 
 
 def _lists(
-    view: WatchView, session: SessionView, now: dt.datetime, height: int, width: int, glyphs: Glyphs
+    view: WatchView,
+    session: SessionView,
+    now: Now | dt.datetime,
+    height: int,
+    width: int,
+    glyphs: Glyphs,
 ) -> list[Line]:
     """Answers and learned toys side by side, then commands and faults; as many as fit."""
     if height < 2:
@@ -524,7 +547,11 @@ def _lists(
 
 
 def frame(
-    view: WatchView, now: dt.datetime, width: int = 80, height: int = 24, glyphs: Glyphs = UNICODE
+    view: WatchView,
+    now: Now | dt.datetime,
+    width: int = 80,
+    height: int = 24,
+    glyphs: Glyphs = UNICODE,
 ) -> list[Line]:
     """The whole screen: header, the question or the step, the lists, and a footer line."""
     width = max(width, MIN_WIDTH)

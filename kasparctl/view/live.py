@@ -17,10 +17,13 @@ import os
 import selectors
 import signal
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TypeVar
 
+from kasparctl.game.wallclock import boot_id
+from kasparctl.view.ages import Now
 from kasparctl.view.follow import Follower
 from kasparctl.view.frame import frame, seconds_to_redraw
 from kasparctl.view.inotify import Inotify
@@ -61,6 +64,15 @@ class Waker:
         os.close(self.write_fd)
 
 
+def live_now(view: WatchView, wall: dt.datetime, monotonic: float, boot: str) -> Now:
+    """Now, for the live view: on the session's monotonic clock where its daemon's run is on
+    this boot (the kernel's monotonic clock is the loop's), else on the wall clock alone."""
+    session = view.session
+    if session is not None and session.boot and session.boot == boot:
+        return Now(wall, monotonic, session.run)
+    return Now(wall)
+
+
 class LiveView:
     """Follows a state directory and draws it, until `q`, `stop()` or an interrupt."""
 
@@ -70,12 +82,17 @@ class LiveView:
         screen: Screen,
         keys: Keys | None = None,
         now: Callable[[], dt.datetime] = utc_now,
+        monotonic: Callable[[], float] = time.monotonic,
+        boot: Callable[[], str] = boot_id,
     ) -> None:
-        """Draw `state_dir` on `screen`; quit on q from `keys`, if given."""
+        """Draw `state_dir` on `screen`; quit on q from `keys`, if given. The clocks (the
+        wall clock, the monotonic one and this boot's id) are injected for tests."""
         self.state_dir = state_dir
         self.screen = screen
         self.keys = keys
         self.now = now
+        self.monotonic = monotonic
+        self.boot = boot()
         self.waker = Waker()
         self._stopping = threading.Event()
         self._note = ""
@@ -150,7 +167,7 @@ class LiveView:
     def _draw(self) -> float | None:
         """Draw the view as of now; how long until it needs drawing again."""
         assert self.view is not None
-        now = self.now()
+        now = live_now(self.view, self.now(), self.monotonic(), self.boot)
         width, height = self.screen.size()
         self.screen.draw(frame(self.view, now, width, height, self.screen.glyphs))
         self.draws += 1

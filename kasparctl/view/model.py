@@ -116,6 +116,9 @@ class FaultSeen:
     # Whether the game stopped for it (the fault stage), and still waits for a resume.
     stopped_game: bool = False
     pending: bool = False
+    # Its monotonic seconds and the daemon's run they count in (kasparctl.view.ages).
+    clock: float | None = None
+    run: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -170,6 +173,13 @@ class SessionView:
     last_seq: int = 0
     last_time: str | None = None
     warnings: tuple[str, ...] = ()
+    # The last record's monotonic seconds; the daemon's run they count in (a start or a
+    # resume begins the next) and the boot its clock record named ("" if none yet).
+    last_clock: float | None = None
+    run: str = ""
+    boot: str = ""
+    # What the last clock record said (kasparctl.game.wallclock); None without one.
+    clock_synchronised: bool | None = None
 
     @property
     def trials(self) -> int:

@@ -23,7 +23,7 @@ from hal.errors import KasparError
 from kasparctl.game.jsonl import read_records
 from kasparctl.game.records import AnyRecord
 from kasparctl.game.session import PLAN_FILE, RECORDS_FILE
-from kasparctl.view.ages import parse_time
+from kasparctl.view.ages import Now, parse_time
 from kasparctl.view.fold import SessionFold
 from kasparctl.view.follow import read_plan
 from kasparctl.view.frame import frame
@@ -128,10 +128,12 @@ class Replay:
             footer=self.position.describe(self.keys is not None),
         )
 
-    def now_at(self, shown: int) -> dt.datetime:
-        """The replay's "now": the time of the last record shown."""
+    def now_at(self, shown: int) -> Now:
+        """The replay's "now": the moment of the last record shown, on the session's
+        monotonic clock (its `clock`, in its run of the daemon) and its wall clock."""
         record = self.records[max(shown - 1, 0)]
-        return parse_time(record.time) or dt.datetime.now(dt.UTC)
+        wall = parse_time(record.time) or dt.datetime.now(dt.UTC)
+        return Now(wall, record.clock, self.session_at(shown).run)
 
     def draw(self) -> None:
         """Show the picture at the current position."""
