@@ -54,7 +54,7 @@ def run_command(
 def _fields(message: str) -> list[str]:
     """A datagram's fields, STATUS= without its battery part (" | battery 13.2 V", last):
     the simulated battery falls with time, so an exact STATUS= is compared without it."""
-    return [re.sub(r" \| battery [^|]*$", "", field) if field.startswith("STATUS=") else field
+    return [without_battery(field) if field.startswith("STATUS=") else field
             for field in message.split("\n")]
 
 
@@ -182,7 +182,12 @@ class OutputLines:
 def status_is(wanted: str) -> Callable[[str], bool]:
     """A STATUS= text that says `wanted`, with the clock's warning after it or not (whether
     the machine running the tests has a synchronised clock is not the test's)."""
-    return lambda text: text.removesuffix(f" | {CLOCK_WORDS}") == wanted
+    return lambda text: without_battery(text).removesuffix(f" | {CLOCK_WORDS}") == wanted
+
+
+def without_battery(status: str) -> str:
+    """STATUS= without its battery part (" | battery 13.2 V", last): it falls with time."""
+    return re.sub(r" \| battery [^|]*$", "", status)
 
 
 def spoken(line: str, phrases: list[str]) -> bool:
