@@ -95,7 +95,7 @@ def test_keyfob_absent_at_boot_is_shown_and_one_plugged_in_later_starts_the_sess
 
         mark = service.notify.mark()
         os.mkfifo(keys, 0o600)  # plugged in
-        service.notify.wait_for_status(status_is(IDLE), since=mark)
+        service.notify.wait_for_status(lambda text: text.startswith(IDLE), since=mark)
         fd = os.open(keys, os.O_WRONLY | os.O_NONBLOCK)
         try:
             os.write(fd, b"G")  # long green: no restart, no second gesture
