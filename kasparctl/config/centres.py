@@ -15,13 +15,12 @@ The ranges stay relative to the centre, as the published limits were.
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import msgspec
 
 from hal.errors import SettingsError
-from kasparctl.config.errors import ConfigError, utf8_text
+from kasparctl.config.errors import ConfigError, read_toml
 from kasparctl.config.schema import Config
 
 KEYS = ("centre_raw",)
@@ -30,14 +29,7 @@ KEYS = ("centre_raw",)
 def read_centres(path: str | Path, joints: tuple[str, ...]) -> dict[str, int]:
     """Joint -> centre_raw from a centres file; ConfigError names the file and key at fault."""
     source = str(path)
-    try:
-        text = utf8_text(Path(path).read_bytes(), source)
-    except OSError as error:
-        raise ConfigError(source, "(file)", f"cannot read it: {error.strerror}") from error
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise ConfigError(source, "(syntax)", f"not valid TOML: {error}") from error
+    raw = read_toml(path)
     centres: dict[str, int] = {}
     for joint, table in raw.items():
         if joint not in joints:

@@ -6,6 +6,10 @@ the message saying what was expected and what was found.
 
 from __future__ import annotations
 
+import tomllib
+from pathlib import Path
+from typing import Any
+
 from hal.errors import KasparError
 
 
@@ -36,3 +40,17 @@ def utf8_text(data: bytes, source: str) -> str:
             f"(byte offset {error.start}): save the file as UTF-8",
         ) from None
 
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """A side file's TOML (poses, centres): ConfigError names the file for one that cannot
+    be read, is not UTF-8 or is not TOML."""
+    source = str(path)
+    try:
+        text = utf8_text(Path(path).read_bytes(), source)
+    except OSError as error:
+        raise ConfigError(source, "(file)", f"cannot read it: {error.strerror}") from error
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(source, "(syntax)", f"not valid TOML: {error}") from error

@@ -10,7 +10,6 @@ rule every pose written inline in kaspar.toml is held to.
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +17,7 @@ import msgspec
 
 from hal.errors import SettingsError
 from hal.servos.settings import ServoSettings
-from kasparctl.config.errors import ConfigError, utf8_text
+from kasparctl.config.errors import ConfigError, read_toml
 from kasparctl.config.schema import Config
 
 # The poses the game takes from the poses file, besides the pilot's locations.
@@ -35,14 +34,7 @@ def read_poses(path: str | Path) -> dict[str, dict[str, float]]:
     cannot be read or parsed and for a value that is not a finite number.
     """
     source = str(path)
-    try:
-        text = utf8_text(Path(path).read_bytes(), source)
-    except OSError as error:
-        raise ConfigError(source, "(file)", f"cannot read it: {error.strerror}") from error
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise ConfigError(source, "(syntax)", f"not valid TOML: {error}") from error
+    raw = read_toml(path)
     poses: dict[str, dict[str, float]] = {}
     for name, table in raw.items():
         if not isinstance(table, dict):
