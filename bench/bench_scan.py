@@ -11,7 +11,6 @@ Run: .venv/bin/python bench/bench_scan.py
 from __future__ import annotations
 
 import asyncio
-import subprocess
 import sys
 import tempfile
 import time
@@ -23,28 +22,15 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 from hal.servos.bus import wire_time  # noqa: E402
 from kasparctl.bringup.servos import DEFAULT_IDS, SCAN_MARGIN_MS, scan  # noqa: E402
 
+# The emulator in its own process, as bench_servos runs it (its timing is not ours).
+sys.path.insert(0, str(ROOT / "bench"))
+from bench_servos import start_emulator  # noqa: E402
+
 BAUD = 115200
 KASPAR_3 = [*range(1, 7), *range(16, 21), *range(32, 37)]
 FACTORY_NEW = 253
 TARGET_S = 5.0  # a full scan while the engineer waits, at the default margin
 ROUNDS = 3
-
-
-def start_emulator(path: Path, ids: list[int]) -> subprocess.Popen[str]:
-    script = f"""
-import sys
-sys.path[:0] = [{str(ROOT)!r}, {str(ROOT / "tests")!r}]
-from pathlib import Path
-from emulators.herkulex import HerkulexEmulator
-emulator = HerkulexEmulator(Path({str(path)!r}), ids={ids!r})
-print("ready", flush=True)
-sys.stdin.read()
-emulator.stop()
-"""
-    process = subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE,
-                               stdout=subprocess.PIPE, text=True)
-    assert process.stdout is not None and process.stdout.readline().strip() == "ready"
-    return process
 
 
 def main() -> None:
@@ -55,7 +41,7 @@ def main() -> None:
     floor = (len(ids) - len(answering)) * (stat + SCAN_MARGIN_MS / 1000) + len(answering) * stat
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "ttyHX"
-        emulator = start_emulator(path, answering)
+        emulator = start_emulator("HerkulexEmulator", path, "herkulex", answering)
         try:
             times, found = [], []
             for _ in range(ROUNDS):
