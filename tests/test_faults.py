@@ -342,6 +342,7 @@ def test_the_real_keyfob_reader_plugged_in_after_the_start_starts_the_session(
     from evdev import ecodes
     from evdev_pipe import PipeBank
     from fault_rig import RecordedNotifier, write_config
+    from service_fixtures import status_is
 
     from hal import Hardware
     from hal.clock import LoopClock
@@ -351,7 +352,7 @@ def test_the_real_keyfob_reader_plugged_in_after_the_start_starts_the_session(
     from hal.voice.sim import SimVoice
     from kasparctl.config import load_config
     from kasparctl.service.daemon import Daemon, DaemonOptions
-    from kasparctl.service.status import CLOCK_WORDS, STATUS_WORDS
+    from kasparctl.service.status import STATUS_WORDS
     from kasparctl.sim import simtime
 
     bank = PipeBank(tmp_path / "input")
@@ -386,22 +387,16 @@ def test_the_real_keyfob_reader_plugged_in_after_the_start_starts_the_session(
             absent = await status(lambda s: "keyfob not connected" in s)
             statuses.append(absent)
             device = bank.plug("event7")  # plugged in: the node appears
-            # Idle, the problem gone: it names the group "next" starts. The battery's
-            # voltage ends STATUS= (it falls with time): compared without it.
-            # The clock's warning, where this machine's clock is unsynchronised, too.
-            def stage_is(words: str, s: str) -> bool:
-                return s.split(" | battery ")[0].removesuffix(f" | {CLOCK_WORDS}") == words
-
-            idle = "waiting: 'next' starts group demo, session 1"
-            await status(lambda s: stage_is(idle, s) and notifier.statuses[-1] == s)
+            # Idle, the problem gone: it names the group "next" starts (compared without
+            # the battery's voltage and the clock's warning, as every service test does).
+            idle = status_is("waiting: 'next' starts group demo, session 1")
+            await status(lambda s: idle(s) and notifier.statuses[-1] == s)
             # No researcher's device in this bundle: their "next" is green held 3 s on
             # the children's keyfob (asked for nothing meanwhile).
             device.down(ecodes.KEY_PAGEDOWN)
             await asyncio.sleep(3.2)  # held: the stimulus itself, in simulated time
             device.up(ecodes.KEY_PAGEDOWN, gap=3.2)
-            # (With the clock's warning after it where this machine's clock is unsynchronised.)
-            placing = STATUS_WORDS["placing"]
-            statuses.append(await status(lambda s: stage_is(placing, s)))
+            statuses.append(await status(status_is(STATUS_WORDS["placing"])))
         finally:
             daemon.request_stop("the test is over")
             assert await running == 0
