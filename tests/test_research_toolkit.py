@@ -350,7 +350,9 @@ def test_contrasts_compare_the_uncertainty_modes_and_the_participants_groups(
             assert contrast["difference_low"] <= contrast["difference"] <= contrast["difference_high"]
             assert contrast["hedges_g"] is not None and contrast["hedges_g_low"] is not None
         if contrast["factor"] == "participant group":
-            assert (contrast["clusters_a"], contrast["clusters_b"], contrast["unit"]) == (6, 6, "child")
+            # Children are nested in groups: two groups a side, so no interval (below MIN_CLUSTERS).
+            assert (contrast["clusters_a"], contrast["clusters_b"], contrast["unit"]) == (2, 2, "group")
+            assert contrast["difference_low"] is None and contrast["p"] is None
     text = (tmp_path / "summary.md").read_text()
     assert "## Contrasts" in text and "| uncertainty mode | paper/spoken - paper/silent |" in text
     assert "contrasts" in summary["figures"]

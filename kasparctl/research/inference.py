@@ -18,9 +18,10 @@ With fewer than two clusters in a condition there is no interval (None).
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,6 +35,9 @@ FloatArray = NDArray[np.float64]
 LEVEL = 0.95
 DEFAULT_REPLICATES = 2000
 DEFAULT_SEED = 0
+# Below this many clusters (on a side of a contrast) no interval is given: a bootstrap over
+# two clusters has three outcomes, over three ten; its percentiles are not a 95 % interval.
+MIN_CLUSTERS = 4
 
 
 @dataclass(frozen=True)
@@ -259,7 +263,7 @@ def estimates(
         float(numerators[:, j].sum() / totals[j]) if totals[j] > 0 else None for j in range(columns)
     ]
     found: list[tuple[float, float] | None] = [None] * columns
-    if clusters >= 2:
+    if clusters >= MIN_CLUSTERS:
         seeds = _batch_seeds(replicates, seed, salt)
         for start in range(0, columns, BLOCK):
             block = slice(start, start + BLOCK)
@@ -320,8 +324,9 @@ def intervals(
 
 
 def _stable_hash(text: str) -> int:
-    # Python's hash() changes between runs; a report must not.
-    return int.from_bytes(text.encode()[:32].ljust(32, b"\0"), "big") % (1 << 63)
+    # Python's hash() changes between runs; a report must not. The whole salt is hashed:
+    # a prefix would give the ":a" and ":b" sides of a contrast the same resamples.
+    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "big") % (1 << 63)
 
 
 def hedges_g(a: FloatArray, b: FloatArray) -> float | None:
@@ -335,6 +340,28 @@ def hedges_g(a: FloatArray, b: FloatArray) -> float | None:
         return None
     correction = 1 - 3 / (4 * (na + nb) - 9)
     return float((a.mean() - b.mean()) / math.sqrt(pooled) * correction)
+
+
+def standardised(
+    difference: FloatArray,
+    own_a: FloatArray,
+    own_b: FloatArray,
+    rows_a: FloatArray,
+    rows_b: FloatArray,
+) -> FloatArray:
+    """Hedges' g with the contrast's own difference on top (so the two never point apart).
+
+    The difference (of ratios of sums) is divided by the pooled standard deviation of the
+    rows' own values, weighted by how often each row is drawn, small-sample corrected.
+    `rows_a` and `rows_b` are (resamples, rows) draw counts; `difference` is (resamples, columns).
+    """
+    na, _, va = _moments(own_a, rows_a)
+    nb, _, vb = _moments(own_b, rows_b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pooled = ((na - 1) * va + (nb - 1) * vb) / (na + nb - 2)
+        effect = difference / np.sqrt(pooled) * (1 - 3 / (4 * (na + nb) - 9))
+    result: FloatArray = np.where(pooled > 1e-15, effect, np.nan)
+    return result
 
 
 def _moments(values: FloatArray, weights: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -363,6 +390,17 @@ class Contrast:
     unit: str  # what a cluster is: "group", "session" or "child"
     clusters_a: int
     clusters_b: int
+    # Whether the same clusters met both sides (resampled together, a paired bootstrap).
+    paired: bool = False
+    shared: int = 0  # clusters on both sides
+    # Two-sided bootstrap p of "no difference", and after Holm's correction over the report.
+    p: float | None = None
+    p_adjusted: float | None = None
+
+    @property
+    def significant(self) -> bool | None:
+        """Whether the Holm-adjusted p is below 5 % (None without a p)."""
+        return None if self.p_adjusted is None else self.p_adjusted < 1 - LEVEL
 
     def plain(self) -> dict[str, object]:
         """As JSON-ready data."""
@@ -382,10 +420,25 @@ class Contrast:
             "clusters_a": self.clusters_a,
             "clusters_b": self.clusters_b,
             "unit": self.unit,
+            "paired": self.paired,
+            "shared_clusters": self.shared,
+            "p": self.p,
+            "p_holm": self.p_adjusted,
+            "significant_holm": self.significant,
         }
 
 
-Side = tuple[FloatArray, FloatArray]  # (clusters x measures) numerators, denominators
+Side = tuple[FloatArray, FloatArray]  # (rows x measures) numerators, denominators
+IntArray = NDArray[np.int64]
+
+
+def _p_value(column: FloatArray) -> float | None:
+    """Two-sided bootstrap p of a zero difference: twice the smaller tail's share."""
+    finite = column[np.isfinite(column)]
+    if len(finite) == 0 or len(finite) < 0.5 * len(column):
+        return None
+    tail = min(float(np.mean(finite <= 0)), float(np.mean(finite >= 0)))
+    return min(1.0, 2 * tail)
 
 
 def compare(
@@ -396,37 +449,63 @@ def compare(
     unit: str,
     replicates: int,
     seed: int,
+    clusters: tuple[Sequence[str], Sequence[str]] | None = None,
 ) -> list[Contrast]:
-    """Contrasts A - B of ratio measures, from each side's per-cluster sums.
+    """Contrasts A - B of ratio measures, from each side's per-row sums.
 
-    Each side's clusters are resampled on their own (batch by batch); the
-    difference of the ratios and Hedges' g of the clusters' own values get
-    their 95 % percentile intervals from the same resamples.
+    `clusters` names each row's cluster (default: every row its own cluster). The
+    clusters are what is resampled: each side's on its own, or, when some cluster
+    meets both sides (the same group in both conditions), the union of clusters
+    together, so a group's two sides move as one (a paired cluster bootstrap).
+    Hedges' g is the same difference over the pooled SD of the rows' own values,
+    with its interval from the same resamples. No interval below MIN_CLUSTERS a side.
     """
     (num_a, den_a), (num_b, den_b) = sides
-    ka, kb = num_a.shape[0], num_b.shape[0]
+    rows_a, rows_b = num_a.shape[0], num_b.shape[0]
+    names_a = list(clusters[0]) if clusters else [f"a{i}" for i in range(rows_a)]
+    names_b = list(clusters[1]) if clusters else [f"b{i}" for i in range(rows_b)]
+    shared = sorted(set(names_a) & set(names_b))
+    paired = bool(shared)
+    ka, kb = len(set(names_a)), len(set(names_b))
     value_a = _ratio(num_a.sum(axis=0), den_a.sum(axis=0))
     value_b = _ratio(num_b.sum(axis=0), den_b.sum(axis=0))
     own_a, own_b = _ratio(num_a, den_a), _ratio(num_b, den_b)
-    g = [hedges_g(own_a[:, j], own_b[:, j]) for j in range(len(measures))]
+    ones_a, ones_b = np.ones((1, rows_a)), np.ones((1, rows_b))
+    g = standardised((value_a - value_b)[None, :], own_a, own_b, ones_a, ones_b)[0]
     differences = np.full((replicates, len(measures)), np.nan)
     gs = np.full((replicates, len(measures)), np.nan)
-    if ka >= 2 and kb >= 2:
+    if ka >= MIN_CLUSTERS and kb >= MIN_CLUSTERS:
         salt = f"{factor}:{labels[0]}:{labels[1]}"
-        seeds_a = _batch_seeds(replicates, seed, salt + ":a")
-        seeds_b = _batch_seeds(replicates, seed, salt + ":b")
-        for index, (seed_a, seed_b) in enumerate(zip(seeds_a, seeds_b, strict=True)):
+        if paired:
+            union = sorted(set(names_a) | set(names_b))
+            place = {name: i for i, name in enumerate(union)}
+            index_a = np.array([place[n] for n in names_a], dtype=np.int64)
+            index_b = np.array([place[n] for n in names_b], dtype=np.int64)
+            seeds = _batch_seeds(replicates, seed, salt + ":paired")
+            pairs = [(s, s) for s in seeds]
+        else:
+            index_a = _codes(names_a)
+            index_b = _codes(names_b)
+            pairs = list(
+                zip(
+                    _batch_seeds(replicates, seed, salt + ":a"),
+                    _batch_seeds(replicates, seed, salt + ":b"),
+                    strict=True,
+                )
+            )
+        for index, (seed_a, seed_b) in enumerate(pairs):
             start = index * BATCH
             count = min(BATCH, replicates - start)
-            wa, wb = _weights(ka, count, seed_a), _weights(kb, count, seed_b)
+            if paired:
+                drawn = _weights(len(place), count, seed_a)
+                wa, wb = drawn[:, index_a], drawn[:, index_b]
+            else:
+                wa = _weights(int(index_a.max()) + 1, count, seed_a)[:, index_a]
+                wb = _weights(int(index_b.max()) + 1, count, seed_b)[:, index_b]
             rows = slice(start, start + count)
-            differences[rows] = _ratio(wa @ num_a, wa @ den_a) - _ratio(wb @ num_b, wb @ den_b)
-            na, ma, va = _moments(own_a, wa)
-            nb, mb, vb = _moments(own_b, wb)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                pooled = ((na - 1) * va + (nb - 1) * vb) / (na + nb - 2)
-                effect = (ma - mb) / np.sqrt(pooled) * (1 - 3 / (4 * (na + nb) - 9))
-            gs[rows] = np.where(pooled > 1e-15, effect, np.nan)
+            resampled = _ratio(wa @ num_a, wa @ den_a) - _ratio(wb @ num_b, wb @ den_b)
+            differences[rows] = resampled
+            gs[rows] = standardised(resampled, own_a, own_b, wa, wb)
     difference_intervals = _intervals(differences)
     g_intervals = _intervals(gs)
     contrasts = []
@@ -434,11 +513,13 @@ def compare(
         a_value = None if np.isnan(value_a[j]) else float(value_a[j])
         b_value = None if np.isnan(value_b[j]) else float(value_b[j])
         difference = None if a_value is None or b_value is None else a_value - b_value
+        g_value = None if difference is None or not np.isfinite(g[j]) else float(g[j])
         low, high = difference_intervals[j] or (None, None)
         g_low, g_high = g_intervals[j] or (None, None)
+        p = _p_value(differences[:, j])
         if difference is None:
-            low = high = None
-        if g[j] is None:
+            low = high = p = None
+        if g_value is None:
             g_low = g_high = None
         contrasts.append(
             Contrast(
@@ -448,14 +529,35 @@ def compare(
                 measure,
                 a_value,
                 b_value,
-                Estimate(difference, low, high, ka + kb),
-                Estimate(g[j], g_low, g_high, ka + kb),
+                Estimate(difference, low, high, ka + kb - len(shared)),
+                Estimate(g_value, g_low, g_high, ka + kb - len(shared)),
                 unit,
                 ka,
                 kb,
+                paired,
+                len(shared),
+                p,
             )
         )
     return contrasts
+
+
+def _codes(names: Sequence[str]) -> IntArray:
+    """Each row's cluster as an index into the side's own clusters."""
+    place: dict[str, int] = {}
+    return np.array([place.setdefault(n, len(place)) for n in names], dtype=np.int64)
+
+
+def holm(contrasts: Sequence[Contrast]) -> list[Contrast]:
+    """The contrasts with Holm-adjusted p over all of them (one family: the report's)."""
+    tested = sorted((c.p, i) for i, c in enumerate(contrasts) if c.p is not None)
+    m = len(tested)
+    adjusted: dict[int, float] = {}
+    running = 0.0
+    for rank, (p, i) in enumerate(tested):
+        running = max(running, min(1.0, (m - rank) * p))
+        adjusted[i] = running
+    return [replace(c, p_adjusted=adjusted.get(i)) for i, c in enumerate(contrasts)]
 
 
 # The measures contrasted between conditions: the learner's, and the children's answers.
@@ -499,6 +601,7 @@ def condition_contrasts(
                 unit,
                 replicates,
                 seed,
+                (totals[a.label].clusters, totals[b.label].clusters),
             )
     return contrasts
 
@@ -564,8 +667,10 @@ def attribute_contrasts(
 ) -> list[Contrast]:
     """Children compared by each category of participants.csv (each pair of its levels).
 
-    The unit is the child: children are resampled, not answers. Only children with
-    a participant code (and a row in the file) take part.
+    Children are nested in groups (the same robot, the same game, each other): the
+    group is what is resampled, its children with it, and a group with children at
+    both levels is resampled once for both (paired). Each child's own values give
+    Hedges' g's SD. Only children with a participant code (and a row in the file) take part.
     """
     contrasts = []
     for attribute in participants.categories():
@@ -592,8 +697,14 @@ def attribute_contrasts(
                     (a, b),
                     CHILD_MEASURES,
                     (side(a), side(b)),
-                    "child",
+                    "group",
                     replicates,
                     seed,
+                    ([_group(c) for c in levels[a]], [_group(c) for c in levels[b]]),
                 )
     return contrasts
+
+
+def _group(child: ChildMeasures) -> str:
+    """The cluster a child is resampled with: its group (or groups), else the child alone."""
+    return "+".join(sorted(child.groups)) or f"child {child.key}"

@@ -24,7 +24,12 @@ from kasparctl.research.catalogue import SessionData
 from kasparctl.research.children import Children
 from kasparctl.research.conditions import by_condition, by_uncertainty, pooled
 from kasparctl.research.figures import FigureData, draw_all
-from kasparctl.research.inference import attribute_contrasts, condition_contrasts, intervals
+from kasparctl.research.inference import (
+    attribute_contrasts,
+    condition_contrasts,
+    holm,
+    intervals,
+)
 from kasparctl.research.output import atomic_file, private_directory, write_bytes
 from kasparctl.research.participants import Participants
 from kasparctl.research.source import Source
@@ -62,6 +67,7 @@ def write_report(
     contrasts = condition_contrasts(conditions, method.unit, replicates, seed)
     measured = list(children.by_key.values())
     contrasts += attribute_contrasts(measured, participants, replicates, seed)
+    contrasts = holm(contrasts)  # one family: every contrast of the report
 
     def joined(coded_only: bool) -> Iterator[dict[str, Any]]:
         for row in children.rows(coded_only):
