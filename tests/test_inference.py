@@ -157,3 +157,17 @@ def test_the_difference_and_interval_match_cluster_robust_ols(paired: bool) -> N
     width = high - low
     assert c.difference.low == pytest.approx(low, abs=0.12 * width)
     assert c.difference.high == pytest.approx(high, abs=0.12 * width)
+
+
+def test_the_order_of_conditions_is_reported_for_paired_groups() -> None:
+    """Groups that met A first do better on A by 0.3, groups that met B first by 0.1."""
+    names = ["g1", "g2", "g3", "g4", "g5"]
+    num_a = np.array([[8.0], [8.0], [6.0], [6.0], [6.0]])
+    num_b = np.array([[5.0], [5.0], [5.0], [5.0], [5.0]])
+    den = np.full((5, 1), 10.0)
+    first = {"g1": "a", "g2": "a", "g3": "b", "g4": "b", "g5": "b"}
+    c = compare("f", ("A", "B"), ["m"], ((num_a, den), (num_b, den)), "group", 500, 0, (names, names), first)[0]
+    assert c.paired and (c.a_first, c.b_first) == (2, 3)
+    assert c.difference_a_first == pytest.approx(0.3)
+    assert c.difference_b_first == pytest.approx(0.1)
+    assert c.plain()["order_a_first"] == 2

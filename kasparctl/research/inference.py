@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from kasparctl.learning.study_stats import count_errors
 from kasparctl.research.children import ChildMeasures, Feedback
-from kasparctl.research.conditions import Condition
+from kasparctl.research.conditions import Condition, cluster_of
 from kasparctl.research.participants import Participants
 
 FloatArray = NDArray[np.float64]
@@ -396,6 +396,11 @@ class Contrast:
     # Two-sided bootstrap p of "no difference", and after Holm's correction over the report.
     p: float | None = None
     p_adjusted: float | None = None
+    # Paired: how many shared clusters met A first, B first, and the difference in each.
+    a_first: int = 0
+    b_first: int = 0
+    difference_a_first: float | None = None
+    difference_b_first: float | None = None
 
     @property
     def significant(self) -> bool | None:
@@ -425,6 +430,10 @@ class Contrast:
             "p": self.p,
             "p_holm": self.p_adjusted,
             "significant_holm": self.significant,
+            "order_a_first": self.a_first,
+            "order_b_first": self.b_first,
+            "difference_a_first": self.difference_a_first,
+            "difference_b_first": self.difference_b_first,
         }
 
 
@@ -450,6 +459,7 @@ def compare(
     replicates: int,
     seed: int,
     clusters: tuple[Sequence[str], Sequence[str]] | None = None,
+    first: dict[str, str] | None = None,
 ) -> list[Contrast]:
     """Contrasts A - B of ratio measures, from each side's per-row sums.
 
@@ -459,6 +469,8 @@ def compare(
     together, so a group's two sides move as one (a paired cluster bootstrap).
     Hedges' g is the same difference over the pooled SD of the rows' own values,
     with its interval from the same resamples. No interval below MIN_CLUSTERS a side.
+    `first` names, for clusters on both sides, which side ("a" or "b") they met first:
+    the order is reported (counts, and the difference within each order).
     """
     (num_a, den_a), (num_b, den_b) = sides
     rows_a, rows_b = num_a.shape[0], num_b.shape[0]
@@ -508,6 +520,15 @@ def compare(
             gs[rows] = standardised(resampled, own_a, own_b, wa, wb)
     difference_intervals = _intervals(differences)
     g_intervals = _intervals(gs)
+    by_order: dict[str, FloatArray] = {}
+    for order in ("a", "b"):
+        met = {n for n in shared if (first or {}).get(n) == order}
+        rows_a_o = [i for i, n in enumerate(names_a) if n in met]
+        rows_b_o = [i for i, n in enumerate(names_b) if n in met]
+        by_order[order] = _ratio(num_a[rows_a_o].sum(axis=0), den_a[rows_a_o].sum(axis=0)) - _ratio(
+            num_b[rows_b_o].sum(axis=0), den_b[rows_b_o].sum(axis=0)
+        )
+    orders = [(first or {}).get(n) for n in shared]
     contrasts = []
     for j, measure in enumerate(measures):
         a_value = None if np.isnan(value_a[j]) else float(value_a[j])
@@ -537,9 +558,18 @@ def compare(
                 paired,
                 len(shared),
                 p,
+                None,
+                orders.count("a"),
+                orders.count("b"),
+                _finite(by_order["a"][j]),
+                _finite(by_order["b"][j]),
             )
         )
     return contrasts
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
 
 
 def _codes(names: Sequence[str]) -> IntArray:
@@ -602,8 +632,21 @@ def condition_contrasts(
                 replicates,
                 seed,
                 (totals[a.label].clusters, totals[b.label].clusters),
+                _first_met(a, b, unit),
             )
     return contrasts
+
+
+def _first_met(a: Condition, b: Condition, unit: str) -> dict[str, str]:
+    """For each cluster with sessions in both conditions: the one it met first ("a" or "b")."""
+    earliest: list[dict[str, str]] = [{}, {}]
+    for side, condition in zip(earliest, (a, b), strict=True):
+        for session in condition.sessions:
+            cluster = cluster_of(session, unit)
+            started = session.meta.created or session.name
+            side[cluster] = min(side.get(cluster, started), started)
+    both = set(earliest[0]) & set(earliest[1])
+    return {c: "a" if earliest[0][c] <= earliest[1][c] else "b" for c in both}
 
 
 def _one_factor(first: Condition, second: Condition) -> str | None:
