@@ -10,10 +10,13 @@ percentile intervals from B resamples (2,000 by default, seeded, so a report
 is reproducible).
 
 A contrast between two conditions resamples each condition's clusters
-independently; it gives the difference (in the measure's own unit) with its
-interval, and Hedges' g (the difference of the clusters' own means over
-their pooled standard deviation, small-sample corrected) with its interval.
-With fewer than two clusters in a condition there is no interval (None).
+independently, or, when a cluster meets both sides, the union of clusters with
+one set of weights (a paired cluster bootstrap, with the order reported). It
+gives the difference (in the measure's own unit) with its interval, Hedges' g
+(that same difference over the pooled SD of the clusters' own values,
+small-sample corrected) with its interval, and a bootstrap p, Holm-adjusted
+over a report's contrasts (`holm`). Children are resampled with their groups.
+Below MIN_CLUSTERS clusters (a side) there is no interval (None).
 """
 
 from __future__ import annotations
