@@ -171,3 +171,19 @@ def test_the_order_of_conditions_is_reported_for_paired_groups() -> None:
     assert c.difference_a_first == pytest.approx(0.3)
     assert c.difference_b_first == pytest.approx(0.1)
     assert c.plain()["order_a_first"] == 2
+
+
+@pytest.mark.slow
+def test_coverage_and_false_positives_over_500_simulated_studies() -> None:
+    """95 % intervals cover a known effect in 92-98 % of studies; p < 0.05 under none in 3-7 %."""
+    rng = np.random.default_rng(500)
+    covered = false_positives = 0
+    studies = 500
+    for seed in range(studies):
+        effect_side, _ = study(rng, 20, 0.1, spread=0.1)
+        c = contrast_of(effect_side, 1000, seed)
+        covered += c.difference.low <= 0.1 <= c.difference.high  # type: ignore[operator]
+        null_side, _ = study(rng, 20, 0.0, spread=0.1)
+        false_positives += contrast_of(null_side, 1000, seed).p < 0.05  # type: ignore[operator]
+    assert 0.92 <= covered / studies <= 0.98
+    assert 0.03 <= false_positives / studies <= 0.07
