@@ -46,9 +46,10 @@ def run(studies: int, replicates: int, groups: int, paired: bool) -> tuple[float
             (na, da, ca), (nb, db, cb) = simulate(rng, groups, effect, paired)
             c = compare("f", ("A", "B"), ["rate"], ((na, da), (nb, db)), "group",
                         replicates, study, (ca, cb))[0]
-            assert c.difference.low is not None and c.difference.high is not None and c.p is not None
+            low, high = c.difference.low, c.difference.high
+            assert low is not None and high is not None and c.p is not None
             if effect:
-                covered += c.difference.low <= EFFECT <= c.difference.high
+                covered += low <= EFFECT <= high
             else:
                 false_positives += c.p < 0.05
     return covered / studies, false_positives / studies
