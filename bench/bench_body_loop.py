@@ -26,6 +26,7 @@ import msgspec
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT)]
 
+from hal import scheduling  # noqa: E402
 from hal.clock import Alarm, MonotonicClock  # noqa: E402
 from hal.servos.sim import SimServos  # noqa: E402
 from kasparctl.body.api import Gaze, GazeKind  # noqa: E402
@@ -96,6 +97,7 @@ async def main(seconds: float) -> None:
     late = body.lateness[10:]  # the first ticks include the loop's start
     p99 = p99_ms(late)
     sent = sum(len(d.writes) for d in servos.drivers.values())
+    print(f"scheduling: {scheduling.current()}")
     print(f"body control loop: {len(servos.joints)} joints, {settings.rate_hz:g} Hz, every layer "
           f"on, {wall:.1f} s wall, {len(late)} ticks, {sent} goal packets")
     row("CPU (% of one core)", f"{100 * cpu / wall:.2f} %", f"< {TARGET_CPU_PERCENT:g} %",

@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import re
 import signal
 import subprocess
@@ -298,6 +299,11 @@ def report(request: pytest.FixtureRequest, robot: Robot) -> None:
         f"boot {seconds('boot')}, install {seconds('install')}, "
         f"{cache or 'trees from the cache'}"
     )
+    if "lateness" in robot.story:
+        line += "; body loop tick lateness p99 (empty-loop floor) " + ", ".join(
+            f"{label} {late:.2f} ms ({floor:.2f} ms)"
+            for label, (late, floor) in robot.story["lateness"].items()
+        )
     if "no sound card" in robot.story:
         line += f"; without a sound card the player said first: {robot.story['no sound card']!r}"
     plugins = request.config.pluginmanager
@@ -407,6 +413,58 @@ def test_the_running_daemon_holds_no_privilege(robot: Robot) -> None:
         assert int(status[capabilities], 16) == 0, (capabilities, status[capabilities])
     assert status["NoNewPrivs"].strip() == "1"
     assert status["Seccomp"].strip() == "2"  # a system-call filter
+
+
+def thread_scheduling(robot: Robot, pid: int) -> dict[str, tuple[str, int]]:
+    """Each thread of `pid`: its name, and (policy, real-time priority) from /proc's stat."""
+    policies = {0: "other", 1: "fifo", 2: "rr", 3: "batch", 5: "idle"}
+    seen = {}
+    for task in robot.machine.run(["ls", f"/proc/{pid}/task"]).stdout.split():
+        stat = robot.machine.read_bytes(f"/proc/{pid}/task/{task}/stat").decode()
+        name = stat[stat.index("(") + 1 : stat.rindex(")")]
+        fields = stat[stat.rindex(")") + 2 :].split()
+        # stat(5): rt_priority and policy are fields 40 and 41, the 38th and 39th after comm.
+        seen[f"{task} {name}"] = (policies.get(int(fields[38]), fields[38]), int(fields[37]))
+    return seen
+
+
+def test_the_body_loops_thread_alone_runs_real_time(robot: Robot) -> None:
+    pid = robot.main_pid()
+    threads = thread_scheduling(robot, pid)
+    main = next(key for key in threads if key.startswith(f"{pid} "))
+    assert threads.pop(main) == ("fifo", 10), main
+    # Reset on fork: the buses', the executor's and the voice's threads are normal.
+    assert threads, "the daemon has its bus and voice threads"
+    assert set(threads.values()) == {("other", 0)}, threads
+    assert "scheduling" in robot.log_events()
+
+
+# Seconds of each of the two runs of the body loop's benchmark (and a third of it on the
+# empty loop first); KASPAR_BOOT_LATENESS_S longer for bench/bench_realtime.py's figures.
+LATENESS_SECONDS = os.environ.get("KASPAR_BOOT_LATENESS_S", "3")
+REAL_TIME = ["-p", "CPUSchedulingPolicy=fifo", "-p", "CPUSchedulingPriority=10",
+             "-p", "CPUSchedulingResetOnFork=yes"]  # fmt: skip
+
+
+def test_the_body_loops_lateness_with_and_without_real_time(robot: Robot) -> None:
+    """Measured, not asserted (a shared machine's timing is no test): the figures go to the
+    report line; asserted is that each run ran under the policy it was given."""
+    figures = {}
+    for label, properties in (("normal", []), ("fifo 10", REAL_TIME)):
+        result = robot.machine.run(
+            ["systemd-run", "--quiet", "--wait", "--pipe", "--collect", *properties, "--",
+             "/opt/kasparctl/bin/python", f"{CHECKOUT}/bench/bench_body_loop.py",
+             LATENESS_SECONDS],
+            timeout=120,
+        )  # fmt: skip
+        out = result.stdout
+        policy = re.search(r"scheduling: (.*)", out)
+        assert policy and policy.group(1).startswith(label.split()[0].replace("normal", "other")), out
+        late = re.search(r"tick lateness p99\s+(\d+\.\d+) ms", out)
+        floor = re.search(r"empty loop just before: p99 (\d+\.\d+) ms", out)
+        assert late and floor, out
+        figures[label] = (float(late.group(1)), float(floor.group(1)))
+    robot.story["lateness"] = figures
 
 
 OPEN_DEVICES = (

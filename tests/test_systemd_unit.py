@@ -12,8 +12,9 @@ from capabilities import man_page_problem, need
 
 REPO = Path(__file__).resolve().parents[1]
 UNIT = REPO / "systemd" / "kasparctl.service"
-# systemd-analyze security rates the unit 0.7 ("SAFE"); a change that exposes more fails.
-EXPOSURE_LIMIT = 0.7
+# systemd-analyze security rates the unit 0.6 ("SAFE"; 0.7 before PrivateMounts=); a change
+# that exposes more fails.
+EXPOSURE_LIMIT = 0.6
 
 
 def unit_for_this_machine(tmp_path: Path) -> Path:
@@ -55,7 +56,7 @@ def test_systemd_analyze_verify_says_nothing(tmp_path: Path) -> None:
     assert result.stderr == "" and result.returncode == 0, result.stderr
 
 
-def test_security_exposure_is_at_most_0_7(tmp_path: Path) -> None:
+def test_security_exposure_is_at_most_0_6(tmp_path: Path) -> None:
     result = subprocess.run(
         [
             systemd_analyze(),
@@ -91,6 +92,11 @@ def test_unit_keeps_what_the_robot_needs() -> None:
         # systemctl reload fails when the daemon refuses (kasparctl.service.reload).
         "ExecReload=/opt/kasparctl/bin/kasparctl reload --pid $MAINPID",
         "SyslogLevelPrefix=yes",
+        # The body loop's thread: SCHED_FIFO, not inherited (tests/test_realtime.py),
+        # and the process may not raise it further.
+        "CPUSchedulingPolicy=fifo\n",
+        "CPUSchedulingResetOnFork=yes\n",
+        "RestrictRealtime=yes\n",
     ):
         assert line in text, line
 

@@ -14,12 +14,14 @@ that cannot be read raises its own error first.
 from __future__ import annotations
 
 import asyncio
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from hal.clock import MonotonicClock
+from hal.scheduling import UNIT_POLICY, UNIT_PRIORITY, kernel_grants_realtime
 from hal.servos.api import JointStatus
 from hal.servos.joints import Joints
 from hal.servos.ports import SYSFS, describe
@@ -103,12 +105,34 @@ def _body(config: Config) -> list[Result]:
 
 
 async def _hardware(config: Config, speak: bool) -> list[Result]:
-    checks: list[Callable[[Config, bool], Any]] = [_servos, _voice, _clock]
+    checks: list[Callable[[Config, bool], Any]] = [_servos, _voice, _clock, _scheduling]
     return [result for check in checks for result in await check(config, speak)]
 
 
 async def _clock(config: Config, speak: bool) -> list[Result]:
     return [clock_row(clock_source())]
+
+
+async def _scheduling(config: Config, speak: bool) -> list[Result]:
+    refused = await asyncio.to_thread(kernel_grants_realtime)
+    return [scheduling_row(refused, os.geteuid() == 0)]
+
+
+def scheduling_row(refused: str | None, as_root: bool) -> Result:
+    """Whether the unit's real-time policy would be granted: refused, the service would not
+    start (214/SETSCHEDULER); as another user than root the answer means nothing."""
+    wanted = f"{UNIT_POLICY} {UNIT_PRIORITY}"
+    if refused is None:
+        return Result("scheduling", True, f"the kernel grants the unit's {wanted}")
+    if not as_root:
+        return Result(
+            "scheduling", True, f"not checked: only root can ask for {wanted} as systemd "
+            "would (run check as root)", warning=True,
+        )
+    return Result(
+        "scheduling", False, f"{refused}: the service would not start (214/SETSCHEDULER); "
+        "docs/install.md, real-time scheduling",
+    )
 
 
 def clock_row(source: ClockSource) -> Result:

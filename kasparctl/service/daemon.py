@@ -45,6 +45,7 @@ from hal import Hardware
 from hal.build import build
 from hal.clock import LoopClock
 from hal.errors import HalError
+from hal.scheduling import log_scheduling
 from kasparctl.body.api import Body, StillBody
 from kasparctl.body.behaviours import BehaviourError
 from kasparctl.body.build import make_body
@@ -658,4 +659,6 @@ def run_daemon(options: DaemonOptions) -> int:
     """
     daemon = Daemon(options)
     configure_logging(daemon.config.logging.level, daemon.config.logging.format)
+    # What the unit gave the thread that runs the event loop (and so the body loop).
+    log_scheduling()
     return asyncio.run(daemon.run())
