@@ -45,6 +45,7 @@ COMMAND_MODULES = (
     "fit_teacher",
     "import_content",
     "keyfob",
+    "plan",
 )
 
 

@@ -111,6 +111,13 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
     ],
     "keyfob list": [(["--sys", ""], "--sys")],
     "keyfob learn": [(["researcher", "1", "--timeout", "0"], "--timeout"), (["nobody", "1"], "role")],
+    "plan": [
+        (["--conditions", "a,b", "--robots", "A", "--out", "o"], "--groups"),
+        (["--groups", "4", "--conditions", "fast/loud,slow", "--robots", "A", "--out", "o"],
+         "--conditions"),
+        (["--groups", "4", "--conditions", "fast,slow", "--robots", "A,B,C",
+          "--robot-plan", "condition", "--out", "o"], "--robot-plan"),
+    ],
 }
 
 # Options whose value is any text: names the configuration defines (a profile, a group,
@@ -148,6 +155,7 @@ REQUIRED = {
     "fit-teacher": ["--out", "-"],
     "import": ["content", "--robot", "kaspar-3", "--out", "o"],
     "keyfob learn": ["researcher", "1"],
+    "plan": ["--conditions", "a,b", "--robots", "A", "--out", "o"],
 }
 
 
@@ -217,7 +225,7 @@ def test_every_seed_follows_the_one_seed_rule(capsys: pytest.CaptureFixture[str]
         for action in _valued(parser)
         if "--seed" in action.option_strings
     }
-    assert set(seeds) == {"simulate", "demo", "replicate", "report"}
+    assert set(seeds) == {"simulate", "demo", "replicate", "report", "plan"}
     assert all(kind is arguments.seed for kind in seeds.values())
     assert arguments.seed(str(arguments.SEED_LIMIT)) == 2**63 - 1
     for refused in ("-1", str(2**63), "1.5"):
@@ -276,6 +284,8 @@ def _failures(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "fit-teacher": (["--state-dir", nowhere, "--out", "-"], nowhere),
         "import": ([nowhere, "--robot", "kaspar-3", "--out", str(tmp / "out"), *config], missing),
         "keyfob learn": (["researcher", "event999", *config], "event999"),
+        "plan": (["--groups", "4", "--conditions", "fast,slow", "--robots", "A", *config,
+                  "--out", str(tmp / "plan")], missing),
     }
 
 

@@ -3,6 +3,8 @@
 UTF-8, then TOML, then msgspec into the schema (unknown keys rejected, a key's
 own limits held), then the rules across tables; then the voice follows the
 language, relative paths are anchored at the file and the poses file is read.
+A `sessions_file` gives the planned sessions (kasparctl.config.sessions_file),
+held to the same rules as sessions planned in kaspar.toml.
 Every error names the file, the key path, what was expected and what was found.
 """
 
@@ -22,6 +24,7 @@ from kasparctl.config.explain import explain_validation_error
 from kasparctl.config.poses import apply_poses_file
 from kasparctl.config.rules import check_playable, validate
 from kasparctl.config.schema import Config
+from kasparctl.config.sessions_file import apply_sessions_file
 
 DEFAULT_CONFIG_PATH = Path("/etc/kaspar/kaspar.toml")
 
@@ -68,7 +71,14 @@ def parse_config(
     except msgspec.ValidationError as error:
         key, message = explain_validation_error(str(error), raw)
         raise ConfigError(source, key, message) from error
-    validate(config, source)
+    config, sessions_source = apply_sessions_file(config, raw, source, base_dir)
+    try:
+        validate(config, source)
+    except ConfigError as error:
+        if sessions_source is None or not error.key.startswith("sessions["):
+            raise
+        # The session at fault is in the sessions file: name it, not kaspar.toml.
+        raise ConfigError(sessions_source, error.key, error.message) from None
     if "voice" not in raw.get("voice", {}):
         # The voice follows the language unless the file names one.
         voice = msgspec.structs.replace(config.voice, voice=voice_for_language(config.language))

@@ -381,6 +381,9 @@ class Config(_Settings, frozen=True):
     voice: VoiceSettings = VoiceSettings()
     daemon: DaemonSettings = DaemonSettings()
     body: BodySettings = BodySettings()
+    # The planned sessions in a file of their own (`kasparctl plan` writes one per robot),
+    # relative to this file, instead of [[sessions]] here (kasparctl.config.sessions_file).
+    sessions_file: str | None = None
 
     def profile(self, name: str | None = None) -> LearnerParams:
         """A profile's learner (the default profile's without a name); KeyError if unknown."""
