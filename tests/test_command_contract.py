@@ -55,6 +55,8 @@ BAD_ARGUMENTS: dict[str, list[tuple[list[str], str]]] = {
         (["--sweep", "gamma=0:1:0.1"], "--sweep"),
         (["--power", "--compare", "teacher=a"], "--compare"),
         (["--power", "--compare", "profile=paper,quick"], "--compare"),
+        (["--paired"], "--paired"),
+        (["--order-effect", "1"], "--order-effect"),
     ],
     "demo": [
         (["--seed", "12345678901234567890"], "--seed"),

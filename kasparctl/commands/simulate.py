@@ -5,7 +5,8 @@ built-in profiles; with --config the game and profiles come from kaspar.toml.
 --alpha, --beta and --gamma override the chosen profile's values; --teacher
 gives the children of a teacher model (`kasparctl fit-teacher` fits one from
 recorded sessions). --power compares two arms (--compare NAME=A,B) and gives
-the power to detect their difference against the number of groups.
+the power to detect their difference against the number of groups; with
+--paired each group plays both arms (a within-group design).
 """
 
 from __future__ import annotations
@@ -16,8 +17,10 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
+from kasparctl.commands import paired_power
 from kasparctl.commands.arguments import (
     PROBABILITY,
+    UsageError,
     assignment,
     finite,
     number_range,
@@ -31,6 +34,7 @@ from kasparctl.commands.arguments import (
 from kasparctl.learning.study_stats import ProblemRecord
 from kasparctl.research.output import check_outputs, write_bytes
 from kasparctl.research.progress import progress
+from kasparctl.sim.paired import PairedAnswer
 from kasparctl.sim.power import DEFAULT_GROUPS, DEFAULT_STUDIES, MAX_SIMULATED_GROUPS
 from kasparctl.sim.request import (
     COMPARABLE,
@@ -100,6 +104,11 @@ def register(subparsers: Any) -> None:
     power("--level", type=PROBABILITY, default=0.05, help="the test's level (default 0.05)")
     power("--figure", metavar="FILE", type=path, default=None,
           help="also draw the power curve (.png or .svg)")
+    power("--paired", action="store_true",
+          help="within-group: each group plays both arms (order counterbalanced), analysed "
+          "paired as the report does; --groups-per-arm is then the number of groups")
+    power("--order-effect", type=finite, default=0.0, metavar="D",
+          help="with --paired: a group's second session is D higher on --measure (default 0)")
     parser.set_defaults(run=run)  # fmt: skip
 
 
@@ -125,9 +134,12 @@ def run(arguments: argparse.Namespace) -> int:
     )  # fmt: skip
     if arguments.figure is not None and arguments.power:
         check_outputs([("--figure", arguments.figure)], [], [], _inputs(arguments))
+    if arguments.order_effect and not arguments.paired:
+        raise UsageError("--order-effect: only with --paired")
     with usage_of(OptionError):
-        result = answer(request, _bar)
-    if isinstance(result, PowerAnswer) and arguments.figure is not None:
+        result = (paired_power.answer(request, arguments.order_effect) if arguments.paired
+                  else answer(request, _bar))  # fmt: skip
+    if isinstance(result, PowerAnswer | PairedAnswer) and arguments.figure is not None:
         kind = "svg" if Path(arguments.figure).suffix.lower() == ".svg" else "png"
         write_bytes(Path(arguments.figure), result.figure(kind))
     print(json.dumps(result.plain(), allow_nan=False) if arguments.json else result.text())

@@ -358,6 +358,15 @@ GROUP_MEASURES = {
 
 def group_values(table: GroupTable, measure: str) -> FloatArray:
     """One value per group (NaN where it has none): the unit a comparison of groups tests."""
+    numerator, denominator = group_sums(table, measure)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        values: FloatArray = numerator / denominator
+    return np.where(np.isfinite(values), values, np.nan)
+
+
+def group_sums(table: GroupTable, measure: str) -> tuple[FloatArray, FloatArray]:
+    """Each group's numerator and denominator of a measure (its value is their ratio), as
+    the report's cluster totals are (kasparctl.research.inference)."""
     learned = table.learned >= 0
     trials = table.trials.astype(np.float64)
     total = trials.sum(axis=1)
@@ -371,8 +380,8 @@ def group_values(table: GroupTable, measure: str) -> FloatArray:
         "final_entropy_mean": ((table.final_entropy * learned).sum(axis=1), learned.sum(axis=1)),
         "wrong_feedback_rate": ((table.wrong_green + table.wrong_red).sum(axis=1), answered),
     }[measure]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        values: FloatArray = np.asarray(numerator, dtype=np.float64) / np.asarray(
-            denominator, dtype=np.float64
-        )
-    return np.where(np.isfinite(values), values, np.nan)
+    groups = table.groups
+    return (
+        np.broadcast_to(np.asarray(numerator, dtype=np.float64), (groups,)).copy(),
+        np.broadcast_to(np.asarray(denominator, dtype=np.float64), (groups,)).copy(),
+    )
