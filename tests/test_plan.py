@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections import Counter
 from itertools import pairwise
 from pathlib import Path
@@ -158,7 +159,8 @@ def test_each_robots_file_is_its_sessions_and_check_accepts_the_robot(
         assert Counter(p.condition for p in config.sessions) == {"fast/spoken": 6, "slow/spoken": 6}
         planned[robot] = {(p.group, p.number) for p in config.sessions}
         assert main(["check", "--config", str(kaspar), "--quiet"]) == 0
-        assert f"{kaspar.name} (12 planned sessions)" in capsys.readouterr().out
+        expected = f"{kaspar} (12 planned sessions from {out / f'sessions-{robot}.toml'})"
+        assert expected in capsys.readouterr().out
     # Together the two robots run each group's two sessions once each.
     assert not planned["KasparA"] & planned["KasparB"]
     assert planned["KasparA"] | planned["KasparB"] == {
@@ -222,3 +224,38 @@ def test_groups_that_do_not_divide_into_the_cells_are_said_to(
     assert "paper/none @ K" in printed
     text = (tmp_path / "o" / "sessions-K.toml").read_text()
     assert text.count("[[sessions]]") == 6 and 'uncertainty = "none"' in text
+
+
+def test_the_demo_robot_plays_the_first_session_of_its_planned_file(tmp_path: Path) -> None:
+    out = _plan(tmp_path)
+    demo = (Path(__file__).resolve().parent.parent / "kasparctl" / "sim" / "demo.toml").read_text()
+    own = '[[sessions]]\ngroup = "demo"\nprofile = "paper"\nspeak_uncertainty = true\n'
+    assert own in demo
+    kaspar = tmp_path / "demo-B.toml"
+    kaspar.write_text('sessions_file = "plan/sessions-KasparB.toml"\n' + demo.replace(own, ""))
+    first = load_config(kaspar).sessions[0]
+    state = tmp_path / "state"
+    assert main(["demo", "--config", str(kaspar), "--fast", "--seed", "1",
+                 "--state-dir", str(state)]) == 0  # fmt: skip
+    (plan_file,) = state.glob("sessions/*/plan.json")
+    recorded = json.loads(plan_file.read_text())
+    assert (recorded["group"], recorded["number"], recorded["condition"]) == (
+        first.group, first.number, first.condition
+    )
+    # The one the file lists first: a group's first session, as the running order says.
+    assert first.number == 1 and out.is_dir()
+
+
+def test_the_robots_own_profiles_are_taken_with_config(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    kaspar = tmp_path / "kaspar.toml"
+    kaspar.write_text("[learner.profiles.careful]\nalpha = 0.4\nbeta = 6.0\n")
+    out = tmp_path / "o"
+    argv = ["plan", "--groups", "4", "--conditions", "careful/spoken,paper/spoken", "--robots",
+            "K", "--seed", "2", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 2
+    assert "expected a learner profile built in" in capsys.readouterr().err
+    assert main([*argv, "--config", str(kaspar)]) == 0
+    assert 'profile = "careful"' in (out / "sessions-K.toml").read_text()
+    assert f"--config {kaspar}" in (out / "sessions-K.toml").read_text()

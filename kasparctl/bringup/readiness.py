@@ -69,8 +69,11 @@ class Robot:
     def settings(self) -> list[Result]:
         """The rows of what was read: the configuration, the phrases, the body, the backend."""
         config = self.config
+        planned = f"{len(config.sessions)} planned sessions"
+        if config.sessions_file is not None:
+            planned += f" from {config.sessions_file}"
         return [
-            Result("configuration", True, f"{self.path} ({len(config.sessions)} planned sessions)"),
+            Result("configuration", True, f"{self.path} ({planned})"),
             Result("phrases", True, self.phrases),
             *_body(config),
             *([] if servo_backend_given(self.path) else [Result("servos", False, NO_BACKEND)]),
