@@ -259,3 +259,16 @@ def test_the_robots_own_profiles_are_taken_with_config(
     assert main([*argv, "--config", str(kaspar)]) == 0
     assert 'profile = "careful"' in (out / "sessions-K.toml").read_text()
     assert f"--config {kaspar}" in (out / "sessions-K.toml").read_text()
+
+
+def test_docs_studies_shows_what_the_command_prints(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "studies.md").read_text()
+    shown = doc.split("The command above prints:\n\n```\n", 1)[1].split("```", 1)[0]
+    monkeypatch.chdir(tmp_path)
+    assert main(["plan", "--groups", "12", "--conditions", "fast/spoken,slow/spoken",
+                 "--robots", "KasparA,KasparB", "--seed", "26", "--out", "plan"]) == 0  # fmt: skip
+    assert capsys.readouterr().out == shown
+    head = doc.split("`plan/sessions-KasparA.toml` begins:\n\n```toml\n", 1)[1].split("...\n", 1)[0]
+    assert (tmp_path / "plan" / "sessions-KasparA.toml").read_text().startswith(head)

@@ -326,10 +326,11 @@ def summary(result: Plan) -> str:
             found = [counts.by_position[(condition.label, p)] for p in range(1, positions + 1)]
             lines.append(f"  {condition.label:<{cell}}  " + "  ".join(f"{n:>3}" for n in found))
     lines.append("Sessions of each condition on each robot:")
-    lines.append(f"  {'':<{cell}}  " + "  ".join(f"{robot:>10}" for robot in design.robots))
+    column = max(10, *(len(robot) for robot in design.robots))
+    lines.append(f"  {'':<{cell}}  " + "  ".join(f"{robot:>{column}}" for robot in design.robots))
     for condition in design.conditions:
         found = [counts.by_robot.get((condition.label, robot), 0) for robot in design.robots]
-        lines.append(f"  {condition.label:<{cell}}  " + "  ".join(f"{n:>10}" for n in found))
+        lines.append(f"  {condition.label:<{cell}}  " + "  ".join(f"{n:>{column}}" for n in found))
     lines.append(
         "Groups meeting each robot: "
         + ", ".join(f"{robot} {n}" for robot, n in counts.groups_by_robot.items())
