@@ -129,3 +129,23 @@ def test_paired_options_are_checked(
     assert main(["simulate", *arguments]) == 2
     (line,) = capsys.readouterr().err.splitlines()
     assert line.startswith("kasparctl simulate: error: ") and message in line
+
+
+def test_studies_are_analysed_a_block_at_a_time_with_the_same_result(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from kasparctl.sim import paired
+
+    calls: list[int] = []
+
+    def counted(num_a, den_a, num_b, den_b, groups, first):  # type: ignore[no-untyped-def]
+        calls.append(num_a.shape[1])
+        return _t_only(num_a, den_a, num_b, den_b, groups, first)
+
+    whole = simulate_paired((PAPER, SLOW), "trials_mean", (4,), 50, 0.05, 9, counted)
+    assert calls == [50, 50]
+    monkeypatch.setattr(paired, "STUDY_BLOCK", 7)
+    calls.clear()
+    blocked = simulate_paired((PAPER, SLOW), "trials_mean", (4,), 50, 0.05, 9, counted)
+    assert calls == [7] * 7 + [1] + [7] * 7 + [1]
+    assert blocked == whole

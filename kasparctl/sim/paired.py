@@ -50,6 +50,8 @@ FloatArray = NDArray[np.float64]
 # Below this many groups the report gives no interval and no p (research.inference's
 # MIN_CLUSTERS); the caller passes it in, as it passes the analysis.
 DEFAULT_MIN_GROUPS = 4
+# Studies analysed in one call: 500 resamples x 2,000 studies x 8 bytes x a few arrays.
+STUDY_BLOCK = 2000
 
 # (A's numerators, A's denominators, B's numerators, B's denominators), each (groups,
 # studies), one column per simulated study; the groups' names; which arm each met
@@ -140,7 +142,12 @@ def paired_power(
             second_a = ~a_first[:n, None]
             num_a = num_a + np.where(second_a, order_effect * den_a, 0.0)
             num_b = num_b + np.where(~second_a, order_effect * den_b, 0.0)
-            p = analyse(num_a, den_a, num_b, den_b, names, first)
+            # A block of studies at a time: the analysis holds (resamples x studies).
+            p: list[float | None] = []
+            for start in range(0, studies, STUDY_BLOCK):
+                block = slice(start, start + STUDY_BLOCK)
+                p += analyse(num_a[:, block], den_a[:, block], num_b[:, block], den_b[:, block],
+                             names, first)  # fmt: skip
             rejected.append(np.array([q is not None and q < level for q in p]))
             rejected_t.append(np.nan_to_num(paired_t(num_a, den_a, num_b, den_b), nan=1.0) < level)
             if len(rejected) == 1:
