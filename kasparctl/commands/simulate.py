@@ -5,7 +5,9 @@ built-in profiles; with --config the game and profiles come from kaspar.toml.
 --alpha, --beta and --gamma override the chosen profile's values; --teacher
 gives the children of a teacher model (`kasparctl fit-teacher` fits one from
 recorded sessions). --power compares two arms (--compare NAME=A,B) and gives
-the power to detect their difference against the number of groups.
+the power to detect their difference against the number of groups. --design
+TARGET finds a learner profile (greens to learn, alpha, beta) whose mean guesses
+per game is TARGET.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from kasparctl.commands.arguments import (
 from kasparctl.learning.study_stats import ProblemRecord
 from kasparctl.research.output import check_outputs, write_bytes
 from kasparctl.research.progress import progress
+from kasparctl.sim.design import DEFAULT_DESIGN_GROUPS
 from kasparctl.sim.power import DEFAULT_GROUPS, DEFAULT_STUDIES, MAX_SIMULATED_GROUPS
 from kasparctl.sim.request import (
     COMPARABLE,
@@ -100,6 +103,12 @@ def register(subparsers: Any) -> None:
     power("--level", type=PROBABILITY, default=0.05, help="the test's level (default 0.05)")
     power("--figure", metavar="FILE", type=path, default=None,
           help="also draw the power curve (.png or .svg)")
+    designing = parser.add_argument_group("a learner for a game's length (--design)").add_argument
+    designing("--design", type=finite, default=None, metavar="TARGET",
+              help="find a profile (greens to learn, alpha, beta) whose mean guesses per game "
+              "is TARGET, coherent as the paper's learner; printed as kaspar.toml lines")
+    designing("--design-groups", type=whole(100, 100_000), default=DEFAULT_DESIGN_GROUPS,
+              help=f"groups simulated per candidate (default {DEFAULT_DESIGN_GROUPS})")
     parser.set_defaults(run=run)  # fmt: skip
 
 
@@ -122,6 +131,8 @@ def run(arguments: argparse.Namespace) -> int:
         compare=arguments.compare,
         design=Design(arguments.measure, arguments.groups_per_arm, arguments.studies,
                       arguments.level),
+        design_for=arguments.design,
+        design_groups=arguments.design_groups,
     )  # fmt: skip
     if arguments.figure is not None and arguments.power:
         check_outputs([("--figure", arguments.figure)], [], [], _inputs(arguments))
