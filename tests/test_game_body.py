@@ -219,10 +219,29 @@ def test_gaze_and_life_switched_off_for_a_session(tmp_path: Path) -> None:
 # -- reactions, greeting, farewell -----------------------------------------------------
 
 
+EXPECTED_FACES = {
+    # The paper's Kaspar smiles on learning a name, and shows nothing after a red.
+    "paper": lambda t: ["happy"] if t["learned"] else [],
+    # What Kaspar did before: a smile after every green, a sad face after every red.
+    "all": lambda t: ["happy" if t["feedback"] == "green" else "sad"],
+    "none": lambda t: [],
+}
+
+
+@pytest.mark.parametrize("reactions", ["paper", "all", "none"])
+def test_reactions_follow_the_setting(tmp_path: Path, reactions: str) -> None:
+    result, body, _, out = play_with_body(tmp_path, config_for("names", reactions=reactions))
+    assert result.finished
+    trials = trials_of(records_of(result))
+    faces = [c.args[0] for c in body.performed() if c.args[0] in ("happy", "sad")]
+    assert faces == [face for t in trials for face in EXPECTED_FACES[reactions](t)]
+    assert ("(Kaspar smiles)" in out) == (reactions != "none")
+
+
 def test_reactions_greeting_and_farewell_are_behaviours_and_replace_the_poses(
     tmp_path: Path,
 ) -> None:
-    result, body, _, out = play_with_body(tmp_path, config_for("names"))
+    result, body, _, out = play_with_body(tmp_path, config_for("names", reactions="all"))
     trials = trials_of(records_of(result))
     reactions = [c.args[0] for c in body.performed() if c.args[0] in ("happy", "sad")]
     assert reactions == ["happy" if t["feedback"] == "green" else "sad" for t in trials]

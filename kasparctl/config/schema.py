@@ -211,6 +211,16 @@ class GameSettings(_Settings, frozen=True):
     # turn it is not is recorded and not taken ("ignore"), or taken as the answer and
     # credited to that child ("take"). A session's plan may choose its own.
     answer_out_of_turn: OutOfTurn = "ignore"
+    # Kaspar's face after an answer (the words are said whatever it is): "paper", happy on
+    # learning a name only, as the paper's Kaspar; "all", happy after every green and sad
+    # after every red (sadness may push children towards false greens); "none".
+    reactions: Literal["paper", "all", "none"] = "paper"
+    # Step 2: a green with the arm within this many degrees (every joint of the pointing
+    # arm) of its rest pose or of the bag shown just before is taken for an arm nobody
+    # moved: Kaspar asks again, up to unmoved_arm_asks times for a bag, then takes it (a
+    # bag may really be there). 0 never asks.
+    unmoved_arm_deg: Annotated[float, msgspec.Meta(ge=0.0, le=90.0, extra={"unit": "deg"})] = 4.0
+    unmoved_arm_asks: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
 
     @property
     def targets(self) -> tuple[str, ...]:

@@ -153,6 +153,8 @@ class SimulatedGroup:
         interruptions: Interruptions | None = None,
         researcher_rng: np.random.Generator | None = None,
         shares_keyfob: Callable[[], bool] = lambda: False,
+        p_unmoved_arm: float = 0.0,
+        unmoved_rng: np.random.Generator | None = None,
     ) -> None:
         """Children who press `keyfob` and move `servos`, believing `answers` (a toy per
         target); their researcher gives commands with `command`. Where the bags are is
@@ -198,6 +200,14 @@ class SimulatedGroup:
         # children are asked nothing for a moment), Kaspar asked for a grown-up, a step.
         self._window = asyncio.Event()
         self._state_since = -math.inf
+        # Step 2: how often the presser presses before anyone has moved the arm; drawn
+        # from its own stream, so the children's answers are the same whatever it is.
+        if not (math.isfinite(p_unmoved_arm) and 0.0 <= p_unmoved_arm <= 1.0):
+            raise TeacherError(
+                f"expected a probability in [0, 1], found {p_unmoved_arm!r}", "p_unmoved_arm"
+            )
+        self.p_unmoved_arm = p_unmoved_arm
+        self._unmoved_rng = unmoved_rng or np.random.default_rng(0)
 
     def __call__(self, event: GameEvent, info: dict[str, Any]) -> None:
         """Hear a game event and act on it, as the children or the researcher would."""
@@ -446,11 +456,14 @@ class SimulatedGroup:
                 margin = (high - low) * 0.1
                 pose[joint] = float(self._room.uniform(low + margin, high - margin))
             self._bag_poses[len(self._bag_poses)] = pose
-        for joint, degrees in self._bag_poses[bag].items():
-            low, high = ranges[joint]
-            noise = float(self.rng.uniform(-SHOW_NOISE_DEG, SHOW_NOISE_DEG))
-            self.servos.push(joint, min(high, max(low, degrees + noise)))
-        self.narrate(f"a child moves Kaspar's arm towards bag {bag + 1}")
+        if self.p_unmoved_arm and self._unmoved_rng.random() < self.p_unmoved_arm:
+            self.narrate("nobody moves Kaspar's arm yet")
+        else:
+            for joint, degrees in self._bag_poses[bag].items():
+                low, high = ranges[joint]
+                noise = float(self.rng.uniform(-SHOW_NOISE_DEG, SHOW_NOISE_DEG))
+                self.servos.push(joint, min(high, max(low, degrees + noise)))
+            self.narrate(f"a child moves Kaspar's arm towards bag {bag + 1}")
         await asyncio.sleep(0.5)
         action = self.messiness.action("green", self.rng)
         if self._waiting() or self._asked != asked:

@@ -171,6 +171,8 @@ class DemoOptions:
     # The wall clock watched, its state recorded as the service records it (None: not
     # watched, as the demo's clock is simulated; a test injects one).
     clock: ClockWatch | None = None
+    # Step 2: the chance the presser presses green before anyone moved the arm.
+    p_unmoved_arm: float = 0.0
 
 
 @dataclass
@@ -427,6 +429,8 @@ def assemble(
             interruptions=options.interruptions,
             shares_keyfob=lambda: researcher is None or not researcher.connected,
             researcher_rng=np.random.default_rng([options.seed, 5, progress]),
+            p_unmoved_arm=options.p_unmoved_arm,
+            unmoved_rng=np.random.default_rng([options.seed, 6, progress]),
             # The bags stay where they were put, whatever was interrupted.
             room=np.random.default_rng([options.seed, 4]),
             narrate=narrate,
