@@ -63,6 +63,9 @@ def test_children_who_press_before_moving_the_arm_are_asked_again_and_never_logg
     records = records_of(result)
     refused = [r for r in records if r["kind"] == "press" and "unmoved" in r]
     assert refused, "the children never pressed too soon: pick another seed"
+    # The demo counts them, and every press was taken as the children meant it.
+    assert result.unmoved_arm_refused == len(refused)
+    assert result.answers_lost == 0
     # The arm still at the bag shown just before (it stays where the last child left it);
     # at rest, for bag 1 of the first round (the next test presses there).
     assert any(r["unmoved"].startswith("bag ") for r in refused)

@@ -95,6 +95,8 @@ class ChildPress:
     # Its key went down after Kaspar had paused or stopped (it waited for the keyfob):
     # no question was open for it.
     withdrawn: bool = False
+    # Step 2: pressed before anyone moved the arm (demo --p-unmoved-arm).
+    unmoved: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -274,7 +276,7 @@ class SimulatedGroup:
 
     async def _press(
         self, action: str, who: str, *, trial: int | None = None, bag: int | None = None,
-        button: str = "", early: bool = False, check: bool = False,
+        button: str = "", early: bool = False, check: bool = False, unmoved: bool = False,
     ) -> None:  # fmt: skip
         self.narrate(f"{who} presses {action.upper()}")
         start = await self.keyfob.perform(action)
@@ -287,6 +289,7 @@ class SimulatedGroup:
                 trial, bag, button, action, gesture_downs(action, start),
                 asyncio.get_running_loop().time(), early, check,
                 withdrawn=self._waiting() and self._state_since <= start,
+                unmoved=unmoved,
             )
         )
 
@@ -456,7 +459,8 @@ class SimulatedGroup:
                 margin = (high - low) * 0.1
                 pose[joint] = float(self._room.uniform(low + margin, high - margin))
             self._bag_poses[len(self._bag_poses)] = pose
-        if self.p_unmoved_arm and self._unmoved_rng.random() < self.p_unmoved_arm:
+        unmoved = bool(self.p_unmoved_arm) and self._unmoved_rng.random() < self.p_unmoved_arm
+        if unmoved:
             self.narrate("nobody moves Kaspar's arm yet")
         else:
             for joint, degrees in self._bag_poses[bag].items():
@@ -468,7 +472,7 @@ class SimulatedGroup:
         action = self.messiness.action("green", self.rng)
         if self._waiting() or self._asked != asked:
             return  # Kaspar waits (the request is asked again once resumed), or it is over
-        await self._press(action, "another child", bag=bag, button="green")
+        await self._press(action, "another child", bag=bag, button="green", unmoved=unmoved)
 
 
 def gesture_downs(action: str, start: float) -> tuple[float, ...]:
