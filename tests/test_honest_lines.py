@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from test_game import play, records_of, trials_of
+from test_game import config_for, play, records_of, trials_of
 
 from kasparctl.game.guess import reaction
 from kasparctl.game.phrases import load_phrasebook
@@ -73,3 +73,28 @@ def test_the_reaction_rule() -> None:
     assert [reaction("all", g, learned) for g, learned in ((True, True), (True, False),
             (False, False))] == ["happy", "happy", "sad"]  # fmt: skip
     assert {reaction("none", g, g) for g in (True, False)} == {None}
+
+
+def test_the_body_never_nods_before_a_toy_kaspar_thinks_unlikely(tmp_path: Path) -> None:
+    from test_game_body import play_with_body
+    from test_interaction import with_plan
+
+    from kasparctl.game.bodywork import normalised_entropy, point_style
+
+    trying = 0
+    for seed in range(1, 9):
+        config = with_plan(config_for("names"), uncertainty="both")
+        result, body, _, _ = play_with_body(tmp_path / str(seed), config, seed=seed)
+        trials = trials_of(records_of(result))
+        sure = [
+            point_style(normalised_entropy(t["entropy"], len(t["candidates"]))).nod
+            for t in trials
+        ]
+        likeliest = [
+            t["probabilities"][t["choice_index"]] >= max(t["probabilities"]) for t in trials
+        ]
+        assert len(body.performed("nod")) == sum(s and k for s, k in zip(sure, likeliest, strict=True))
+        trying += sum(s and not k for s, k in zip(sure, likeliest, strict=True))
+        if trying:
+            break
+    assert trying  # a game where the body was sure and Eq. 2 drew another toy

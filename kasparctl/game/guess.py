@@ -167,8 +167,8 @@ class Guess:
             )
         else:
             guess = ctx.speech.say("guess.names", child=plan.child, toy=plan.toy)
-        if style.nod:
-            # Sure: a nod as it asks.
+        if style.nod and plan.likeliest:
+            # Sure of the toy it names: a nod as it asks (never before a toy it is trying).
             said, _ = await asyncio.gather(guess, ctx.body.perform(NOD, 1.0 - (strength or 0.0)))
             spoken.append(said)
         else:

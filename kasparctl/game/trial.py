@@ -58,6 +58,9 @@ class TrialPlan:
     toy: str
     # The learner's generator after the draw: it moves on only once the trial is recorded.
     learner_rng: dict[str, Any]
+    # The toy drawn is the one Kaspar thinks likeliest: neither its words nor its body
+    # may look sure before naming another.
+    likeliest: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,6 +126,7 @@ def plan_trial(
         choice=choice,
         toy=settings.toys[choice],
         learner_rng=dict(rng.bit_generator.state),
+        likeliest=favourite,
     )
 
 
