@@ -137,8 +137,15 @@ def test_each_mode_says_and_shows_what_it_should(tmp_path: Path, mode: str) -> N
         assert [p["style"] for p in points] == [
             point_style(call.args[1]).words for call in thinking
         ]
+        # A nod when sure, never before a toy that is not the likeliest (Eq. 2 drew another).
         nods = body.performed("nod")
-        assert len(nods) == sum(point_style(call.args[1]).nod for call in thinking)
+        likeliest = [
+            t["probabilities"][t["choice_index"]] >= max(t["probabilities"]) for t in trials
+        ]
+        assert len(nods) == sum(
+            point_style(call.args[1]).nod and sure_of
+            for call, sure_of in zip(thinking, likeliest, strict=True)
+        )
         assert "(Kaspar tilts its head, thinking" in out
     else:
         assert thinking == [] and body.performed("nod") == []
@@ -219,10 +226,29 @@ def test_gaze_and_life_switched_off_for_a_session(tmp_path: Path) -> None:
 # -- reactions, greeting, farewell -----------------------------------------------------
 
 
+EXPECTED_FACES = {
+    # The paper's Kaspar smiles on learning a name, and shows nothing after a red.
+    "paper": lambda t: ["happy"] if t["learned"] else [],
+    # What Kaspar did before: a smile after every green, a sad face after every red.
+    "all": lambda t: ["happy" if t["feedback"] == "green" else "sad"],
+    "none": lambda t: [],
+}
+
+
+@pytest.mark.parametrize("reactions", ["paper", "all", "none"])
+def test_reactions_follow_the_setting(tmp_path: Path, reactions: str) -> None:
+    result, body, _, out = play_with_body(tmp_path, config_for("names", reactions=reactions))
+    assert result.finished
+    trials = trials_of(records_of(result))
+    faces = [c.args[0] for c in body.performed() if c.args[0] in ("happy", "sad")]
+    assert faces == [face for t in trials for face in EXPECTED_FACES[reactions](t)]
+    assert ("(Kaspar smiles)" in out) == (reactions != "none")
+
+
 def test_reactions_greeting_and_farewell_are_behaviours_and_replace_the_poses(
     tmp_path: Path,
 ) -> None:
-    result, body, _, out = play_with_body(tmp_path, config_for("names"))
+    result, body, _, out = play_with_body(tmp_path, config_for("names", reactions="all"))
     trials = trials_of(records_of(result))
     reactions = [c.args[0] for c in body.performed() if c.args[0] in ("happy", "sad")]
     assert reactions == ["happy" if t["feedback"] == "green" else "sad" for t in trials]

@@ -318,7 +318,7 @@ def test_kaspar_says_once_that_it_is_confused_asks_and_confirms_the_reopen(
     said = (recovered / "transcript.txt").read_text()
     _, records, _ = session_of(recovered)
     reopen = next(r for r in records if isinstance(r, ReopenRecord))
-    confused = said.index("I am confused. You said no to every name I have left.")
+    confused = said.index("I am confused. I need help with this one.")
     asked = said.index("A grown-up can help me think again.", confused)
     assert said.index(f"Okay. Maybe I was wrong about the {reopen.name}.", asked)
     assert said.count("I am confused.") == sum(isinstance(r, ConfusedRecord) for r in records)

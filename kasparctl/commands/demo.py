@@ -104,6 +104,10 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--p-early", type=PROBABILITY, default=0.0, help="a press while Kaspar asks"
     )
+    parser.add_argument(
+        "--p-unmoved-arm", type=PROBABILITY, default=0.0,
+        help="step 2: green pressed before anyone moved Kaspar's arm (Kaspar asks again)",
+    )  # fmt: skip
     # The researcher interrupting at any moment, open questions included: none of it may
     # become the children's answer (commands_taken_as_answers in --json).
     parser.add_argument(
@@ -176,6 +180,7 @@ def run(arguments: argparse.Namespace) -> int:
         teacher=teacher,
         think_s=think_s,
         messiness=messiness,
+        p_unmoved_arm=arguments.p_unmoved_arm,
         interactive=arguments.interactive,
         uncertainty=arguments.uncertainty,
         motion=arguments.motion,

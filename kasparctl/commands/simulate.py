@@ -6,7 +6,9 @@ built-in profiles; with --config the game and profiles come from kaspar.toml.
 gives the children of a teacher model (`kasparctl fit-teacher` fits one from
 recorded sessions). --power compares two arms (--compare NAME=A,B) and gives
 the power to detect their difference against the number of groups; with
---paired each group plays both arms (a within-group design).
+--paired each group plays both arms (a within-group design). --design
+TARGET finds a learner profile (greens to learn, alpha, beta) whose mean guesses
+per game is TARGET.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from kasparctl.commands.arguments import (
 from kasparctl.learning.study_stats import ProblemRecord
 from kasparctl.research.output import check_outputs, write_bytes
 from kasparctl.research.progress import progress
+from kasparctl.sim.design import DEFAULT_DESIGN_GROUPS
 from kasparctl.sim.paired import PairedAnswer
 from kasparctl.sim.power import DEFAULT_GROUPS, DEFAULT_STUDIES, MAX_SIMULATED_GROUPS
 from kasparctl.sim.request import (
@@ -109,6 +112,12 @@ def register(subparsers: Any) -> None:
           "paired as the report does; --groups-per-arm is then the number of groups")
     power("--order-effect", type=finite, default=0.0, metavar="D",
           help="with --paired: a group's second session is D higher on --measure (default 0)")
+    designing = parser.add_argument_group("a learner for a game's length (--design)").add_argument
+    designing("--design", type=finite, default=None, metavar="TARGET",
+              help="find a profile (greens to learn, alpha, beta) whose mean guesses per game "
+              "is TARGET, coherent as the paper's learner; printed as kaspar.toml lines")
+    designing("--design-groups", type=whole(100, 100_000), default=DEFAULT_DESIGN_GROUPS,
+              help=f"groups simulated per candidate (default {DEFAULT_DESIGN_GROUPS})")
     parser.set_defaults(run=run)  # fmt: skip
 
 
@@ -131,6 +140,8 @@ def run(arguments: argparse.Namespace) -> int:
         compare=arguments.compare,
         design=Design(arguments.measure, arguments.groups_per_arm, arguments.studies,
                       arguments.level),
+        design_for=arguments.design,
+        design_groups=arguments.design_groups,
     )  # fmt: skip
     if arguments.figure is not None and arguments.power:
         check_outputs([("--figure", arguments.figure)], [], [], _inputs(arguments))

@@ -35,6 +35,7 @@ def validate(config: Config, source: str) -> None:
 
     _check_learner(config.learner, fail)
     _check_game(config.game, fail)
+    _check_profile_greens(config, fail)
     _check_game_controls(config.game, fail)
     _check_game_servos(config, fail)
     _check_sessions(config, fail)
@@ -75,6 +76,23 @@ def _check_learner(learner: LearnerSettings, fail: _Fail) -> None:
         except LearnerError as error:
             fail(f"learner.profiles.{name}.{error.key}", str(error))
     _check_profile_name(learner, learner.default_profile, "learner.default_profile", fail)
+
+
+def _check_profile_greens(config: Config, fail: _Fail) -> None:
+    """The greens to learn of every profile configured or used fit within the game's
+    guesses per target (a built-in profile nobody uses is not held to it)."""
+    limit = config.game.max_trials_per_target
+    profiles = config.learner.all_profiles()
+    used = {config.learner.default_profile, *(plan.profile for plan in config.sessions)}
+    for name in dict.fromkeys([*config.learner.profiles, *sorted(used)]):
+        if name not in profiles:
+            continue  # named in its own error
+        greens = profiles[name].correct_answers_to_learn
+        if greens is not None and greens > limit:
+            fail(
+                f"learner.profiles.{name}.correct_answers_to_learn",
+                f"expected at most game.max_trials_per_target ({limit}), found {greens}",
+            )
 
 
 def _check_profile_name(learner: LearnerSettings, name: str, key: str, fail: _Fail) -> None:

@@ -91,18 +91,34 @@ class ProfileSettings(_Settings, frozen=True):
     reward_green: float = 1.0
     reward_red: float = -1.0
     initial_q: float = 0.0
+    # Greens in a row this learner needs to learn a name (None: [game]'s). Alpha and beta
+    # alone cannot make Kaspar visibly faster (the right toy is still found among six), so
+    # this is the lever children perceive: docs/simulation.md, "fast, paper and slow".
+    correct_answers_to_learn: Annotated[int, msgspec.Meta(ge=1, le=30)] | None = None
 
     def params(self) -> LearnerParams:
         """The learner these settings describe; LearnerError names an unusable value."""
-        return LearnerParams(**msgspec.structs.asdict(self))
+        values = msgspec.structs.asdict(self)
+        return LearnerParams(**{key: values[key] for key in LEARNER_KEYS})
+
+    def shaped(self, game: GameSettings) -> GameSettings:
+        """`game` with this profile's game-shaping values over it (robot-wide < profile)."""
+        if self.correct_answers_to_learn is None:
+            return game
+        return msgspec.structs.replace(game, correct_answers_to_learn=self.correct_answers_to_learn)
 
 
-# "fast" and "slow" are the paper's future-work learners; the values come from
-# `kasparctl simulate --sweep` (see the README for their trials to learn).
+# The keys of a profile that are the learner's own (Eq. 1-3); the others shape the game.
+LEARNER_KEYS = ("alpha", "beta", "gamma", "reward_green", "reward_red", "initial_q")
+
+# "fast" and "slow" are the paper's future-work learners, designed with `kasparctl simulate`
+# to be told apart by children (docs/simulation.md, "fast, paper and slow"): the number of
+# greens is what changes the game's length; alpha * beta stays at or above the paper's 4.8,
+# so neither comes back to a toy just answered red more often than the paper's learner.
 BUILTIN_PROFILES: dict[str, ProfileSettings] = {
     "paper": ProfileSettings(),
-    "fast": ProfileSettings(alpha=0.9, beta=10.0),
-    "slow": ProfileSettings(alpha=0.2, beta=4.0),
+    "fast": ProfileSettings(alpha=0.9, beta=10.0, correct_answers_to_learn=1),
+    "slow": ProfileSettings(alpha=0.6, beta=8.0, correct_answers_to_learn=3),
 }
 
 
@@ -195,6 +211,16 @@ class GameSettings(_Settings, frozen=True):
     # turn it is not is recorded and not taken ("ignore"), or taken as the answer and
     # credited to that child ("take"). A session's plan may choose its own.
     answer_out_of_turn: OutOfTurn = "ignore"
+    # Kaspar's face after an answer (the words are said whatever it is): "paper", happy on
+    # learning a name only, as the paper's Kaspar; "all", happy after every green and sad
+    # after every red (sadness may push children towards false greens); "none".
+    reactions: Literal["paper", "all", "none"] = "paper"
+    # Step 2: a green with the arm within this many degrees (every joint of the pointing
+    # arm) of its rest pose or of the bag shown just before is taken for an arm nobody
+    # moved: Kaspar asks again, up to unmoved_arm_asks times for a bag, then takes it (a
+    # bag may really be there). 0 never asks.
+    unmoved_arm_deg: Annotated[float, msgspec.Meta(ge=0.0, le=90.0, extra={"unit": "deg"})] = 4.0
+    unmoved_arm_asks: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
 
     @property
     def targets(self) -> tuple[str, ...]:

@@ -76,6 +76,8 @@ class StepContext:
     unanswered: Callable[[float], None]
     # Whose turn the open question is, and which seat answered (kasparctl.game.rotation).
     turn: Turn = field(default_factory=Turn)
+    # Each joint's rest position: a pose shown at rest is an arm nobody moved.
+    rest_pose: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def session(self) -> Session:
@@ -86,6 +88,11 @@ class StepContext:
     def plan(self) -> SessionPlan:
         """The plan the session plays."""
         return self.opened.plan
+
+    @property
+    def reactions(self) -> str:
+        """Kaspar's face after an answer ([game] reactions): the one place it is read."""
+        return self.settings.reactions
 
     @property
     def state(self) -> GameState:

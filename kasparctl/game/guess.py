@@ -167,8 +167,8 @@ class Guess:
             )
         else:
             guess = ctx.speech.say("guess.names", child=plan.child, toy=plan.toy)
-        if style.nod:
-            # Sure: a nod as it asks.
+        if style.nod and plan.likeliest:
+            # Sure of the toy it names: a nod as it asks (never before a toy it is trying).
             said, _ = await asyncio.gather(guess, ctx.body.perform(NOD, 1.0 - (strength or 0.0)))
             spoken.append(said)
         else:
@@ -204,22 +204,28 @@ class Guess:
         if settings.variant == "pilot":
             key += "_pilot"
             values["where"] = self._where(plan)
-        expression = settings.happy_pose if green else settings.sad_pose
+        face = reaction(self.ctx.reactions, green, learned)
+        expression = settings.happy_pose if face == HAPPY else settings.sad_pose
         # Face and words together; gather cancels both with the step and retrieves a
         # servo error from either, so none is left unheard.
         await asyncio.gather(
             self.ctx.speech.say(key, **values),
-            self._face(listened, dict(expression), HAPPY if green else SAD),
+            self._face(listened, dict(expression), face),
         )
 
     async def _face(
-        self, listened: dict[str, float] | None, expression: dict[str, float], behaviour: str
+        self,
+        listened: dict[str, float] | None,
+        expression: dict[str, float],
+        behaviour: str | None,
     ) -> None:
         """Back from listening, then the body's behaviour; without a body, the expression
-        pose (held briefly, then undone)."""
+        pose (held briefly, then undone). No behaviour: the face stays as it is."""
         ctx = self.ctx
         if listened:
             await ctx.servos.move(listened, duration=LISTEN_MOVE_S)
+        if behaviour is None:
+            return
         if expression and ctx.body.fallback:
             await self._express(expression)
             return
@@ -250,3 +256,17 @@ class Guess:
         before = await ctx.servos.read_positions()
         await ctx.servos.move(dict(pose), duration=LISTEN_MOVE_S)
         return {joint: before[joint] for joint in pose if joint in before}
+
+
+def reaction(reactions: str, green: bool, learned: bool) -> str | None:
+    """The face Kaspar makes after an answer ([game] reactions), None for none.
+
+    "paper": happy on learning a name only, as the paper's Kaspar (a sad face after a
+    red may push children towards greens they do not mean); "all": happy after every
+    green, sad after every red; "none": no face at all.
+    """
+    if reactions == "all":
+        return HAPPY if green else SAD
+    if reactions == "paper" and green and learned:
+        return HAPPY
+    return None

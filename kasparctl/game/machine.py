@@ -877,6 +877,7 @@ class Game:
             params=config.profile(opened.plan.profile),
             group_size=config.group_size(opened.plan),
             joint_ranges={joint.name: joint.range_deg for joint in config.servos.joints},
+            rest_pose={joint.name: joint.rest_deg for joint in config.servos.joints},
             listening_sound=LISTENING_SOUND in config.voice.clips,
             speech=self.speech,
             body=self.body,

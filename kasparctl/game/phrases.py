@@ -42,6 +42,7 @@ from hal.errors import KasparError
 from kasparctl.game.scripts import (
     ALL_LEVELS,
     DEFAULT_SCRIPT,
+    EXPLORING,
     LAST_ONE,
     LINE_PREFIX,
     SCRIPTS,
@@ -122,7 +123,12 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
         "teach.logged": _spec(about="a later bag's pose is saved, shorter"),
         "teach.try_again": _spec("bag", about="red while showing a bag"),
         "teach.out_of_reach": _spec("bag", about="the arm was shown where it cannot point"),
-        "teach.check_again": _spec("bag", about="shown far from where it was before"),
+        "teach.check_again": _spec(
+            "bag", about="shown far from where it was before; blames neither showing"
+        ),
+        "teach.not_moved": _spec(
+            "bag", about="green with the arm at rest or at the bag before: asked again"
+        ),
         "teach.all_done": _spec(about="step 2 is over"),
         "turn.first": _spec("child", about="a child's first turn in step 4"),
         "guess.names": _spec("child", "toy", variety=_OFTEN, about="the question (names)"),
@@ -130,7 +136,7 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
             "child", "toy", "where", variety=_OFTEN, about="the question (pilot)"
         ),
         "react.right_check": _spec(
-            "toy", variety=_OFTEN, about="green, not learned yet: Kaspar will check"
+            "toy", variety=_OFTEN, about="green, not learned yet: no promise of the next guess"
         ),
         "react.right_check_pilot": _spec("toy", "where", about="the same in the pilot"),
         "react.learned": _spec("toy", variety=_OFTEN, about="green, and now it is learned"),
@@ -151,7 +157,9 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
         "confirm.stop": _spec(sentences=3, about="the researcher stopped: thanks, goodbye"),
         "confirm.close": _spec(about="a stopped session closed for good (no children)"),
         "confirm.reopen": _spec("toy", about="the researcher re-opened the name learned last"),
-        "recovery.confused": _spec(about="every name left was answered red for this bag"),
+        "recovery.confused": _spec(
+            about="every name left was answered red for this bag: asks for help, blames no one"
+        ),
         "recovery.confused_learned": _spec(
             "toy", about="a name learned for another bag was answered green here"
         ),
@@ -179,6 +187,9 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
         },
         LAST_ONE: _spec(variety=_OFTEN, about="varied script: only one name is left"),
         SURE_LEFT: _spec(variety=_OFTEN, about="varied script: sure, the others were wrong"),
+        EXPLORING: _spec(
+            variety=_OFTEN, about="instead of sure: the toy drawn is not the likeliest"
+        ),
     }
 )
 

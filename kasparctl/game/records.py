@@ -176,6 +176,9 @@ class PressRecord(Record, tag="press", kw_only=True, frozen=True):
     # While teaching: the bag whose pose was asked again, and joints outside their range.
     teach_retry: int | UnsetType = UNSET
     outside: list[str] | UnsetType = UNSET
+    # While teaching: the arm was where it had been, "rest" or "bag N" (GameSettings.
+    # unmoved_arm_deg), so the press was not taken as the bag's pose.
+    unmoved: str | UnsetType = UNSET
     # One keyfob per child: the seat (from 1) and device pressed, the child seated there
     # (their place from 0), and, for a press out of turn, the child whose turn it was.
     seat: int | UnsetType = UNSET

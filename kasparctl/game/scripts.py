@@ -11,7 +11,10 @@ lines that say why Kaspar is sure when it is sure by elimination.
 
 A level is chosen by the entropy alone, so it is the research variable (the
 trial's `band`); the line said for it may also depend on the state (one name
-left; sure without a green yet), so the words never contradict the state.
+left; sure without a green yet) and on the toy drawn (Eq. 2 may draw a toy other
+than the likeliest even when the entropy is low: then a confident level says
+"I want to try another name." instead), so the words never contradict the state
+or the guess that follows them.
 The levels' limits live here and not in the phrase books: they are the
 study's, the same in every language.
 
@@ -42,6 +45,12 @@ SURE: Final = "sure"
 LINE_PREFIX: Final = "uncertainty."
 LAST_ONE: Final = "uncertainty.last_one"
 SURE_LEFT: Final = "uncertainty.sure_left"
+# Said instead of a level that claims knowledge when the toy about to be named is not
+# the one Kaspar thinks likeliest (Eq. 2 drew another): "I am sure." then a toy of
+# p = 0.008 would contradict itself. The band recorded stays the entropy's.
+EXPLORING: Final = "uncertainty.exploring"
+# The levels whose lines say Kaspar knows (or nearly knows) the answer.
+CONFIDENT_LEVELS: Final = (SURE, "fairly_sure")
 DEFAULT_SCRIPT: Final = "paper"
 # What a session recorded before scripts existed said: the five bands, varied.
 LEGACY_SCRIPT: Final = "varied"
@@ -105,14 +114,19 @@ class Script:
         clamped = max(entropy_bits, 0.0)
         return next(band.name for band in self.bands if band.contains(clamped))
 
-    def line_key(self, level: str, n_candidates: int, confirmed: bool) -> str:
+    def line_key(
+        self, level: str, n_candidates: int, confirmed: bool, favourite: bool = True
+    ) -> str:
         """The phrase key Kaspar says for `level`.
 
         `confirmed`: the toy it is about to name had a green on this target already
-        (sure because the children said so, not by elimination).
+        (sure because the children said so, not by elimination). `favourite`: it is
+        the likeliest candidate; when it is not, a confident level says EXPLORING.
         """
         if self.says_why and n_candidates == 1:
             return LAST_ONE
+        if level in CONFIDENT_LEVELS and not favourite:
+            return EXPLORING
         if self.says_why and level == SURE and not confirmed:
             return SURE_LEFT
         return LINE_PREFIX + level
@@ -122,14 +136,15 @@ SCRIPTS: Final[Mapping[str, Script]] = MappingProxyType(
     {
         "paper": Script(
             name="paper",
-            version=1,
+            # 2: a confident level before a toy that is not the likeliest says EXPLORING.
+            version=2,
             bands=(Band(SURE, 0.0, 0.5), Band("idea_not_sure", 0.5, math.inf)),
             fixed=True,
             says_why=False,
         ),
         "varied": Script(
             name="varied",
-            version=1,
+            version=2,
             bands=(
                 Band(SURE, 0.0, 0.5),
                 Band("fairly_sure", 0.5, 1.0),

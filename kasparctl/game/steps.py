@@ -12,7 +12,7 @@ trigger: it is given only a StepContext (kasparctl.game.context).
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Coroutine, Mapping
 from typing import Any
 
 import msgspec
@@ -225,6 +225,7 @@ class Steps:
         mover, presser = self.roles(teach_round)
         number = str(bag + 1)
         checked = False
+        refused = 0  # presses taken for an arm nobody moved
         retry: str | None = None
         while True:
             opened = ctx.presses.open(ctx.now())
@@ -252,6 +253,14 @@ class Steps:
                 ctx.record(PressRecord(button=button, at=at, teach_retry=bag, outside=outside))
                 retry = "teach.out_of_reach"
                 continue
+            unmoved = self._unmoved(pose, bag, teach_round)
+            if unmoved is not None and refused < ctx.settings.unmoved_arm_asks:
+                # Nobody moved the arm (a press too soon, or the jobs mixed up): not the
+                # bag's pose. Asked in words that blame no one; after a few, taken.
+                ctx.record(PressRecord(button=button, at=at, teach_retry=bag, unmoved=unmoved))
+                refused += 1
+                retry = "teach.not_moved"
+                continue
             shown = _shown(ctx.state, ctx.settings.targets[bag])
             far = not checked and bool(far_from(pose, shown, ctx.settings.pose_check_deg))
             ctx.change(
@@ -275,6 +284,23 @@ class Steps:
                 await ctx.speech.say("teach.logged")
             return
 
+    def _unmoved(self, pose: dict[str, float], bag: int, teach_round: int) -> str | None:
+        """Where the arm still is, if nobody moved it: "rest", or "bag N" for the bag
+        shown just before (never the same bag's earlier round: that should be near)."""
+        ctx = self.ctx
+        limit = ctx.settings.unmoved_arm_deg
+        if limit <= 0:
+            return None
+        if _within(pose, ctx.rest_pose, limit):
+            return "rest"
+        targets = ctx.settings.targets
+        previous = (bag - 1) % len(targets)
+        if (bag == 0 and teach_round == 0) or previous == bag:
+            return None
+        shown = _shown(ctx.state, targets[previous])
+        before = shown[-1] if shown else ctx.state.poses.get(targets[previous], {})
+        return f"bag {previous + 1}" if _within(pose, before, limit) else None
+
     def _outside_safe_range(self, pose: dict[str, float]) -> list[str]:
         ranges = self.ctx.joint_ranges
         return [
@@ -288,3 +314,10 @@ def _shown(state: GameState, target: str) -> list[dict[str, float]]:
     """Every pose shown for `target` so far (under the median rule)."""
     shown = state.shown_poses
     return [] if isinstance(shown, msgspec.UnsetType) else list(shown.get(target, []))
+
+
+def _within(pose: dict[str, float], reference: Mapping[str, float], limit_deg: float) -> bool:
+    """Every joint of `pose` within `limit_deg` of `reference` (which has them all)."""
+    if not pose or any(joint not in reference for joint in pose):
+        return False
+    return all(abs(degrees - reference[joint]) <= limit_deg for joint, degrees in pose.items())

@@ -58,6 +58,9 @@ class TrialPlan:
     toy: str
     # The learner's generator after the draw: it moves on only once the trial is recorded.
     learner_rng: dict[str, Any]
+    # The toy drawn is the one Kaspar thinks likeliest: neither its words nor its body
+    # may look sure before naming another.
+    likeliest: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,6 +102,7 @@ def plan_trial(
     band = script.level(entropy, offered) if session_plan.says_uncertainty else None
     progress = state.progress[target]
     confirmed = progress.streak > 0 and progress.streak_label == choice
+    favourite = bool(probabilities[choice] >= probabilities.max())
     return TrialPlan(
         trial=state.trials + 1,
         problem_trial=state.progress[target].trials + 1,
@@ -116,10 +120,13 @@ def plan_trial(
         probabilities=probabilities,
         entropy=entropy,
         band=band,
-        uncertainty_line=None if band is None else script.line_key(band, offered, confirmed),
+        uncertainty_line=None if band is None else script.line_key(
+            band, offered, confirmed, favourite
+        ),
         choice=choice,
         toy=settings.toys[choice],
         learner_rng=dict(rng.bit_generator.state),
+        likeliest=favourite,
     )
 
 

@@ -95,6 +95,8 @@ class ChildPress:
     # Its key went down after Kaspar had paused or stopped (it waited for the keyfob):
     # no question was open for it.
     withdrawn: bool = False
+    # Step 2: pressed before anyone moved the arm (demo --p-unmoved-arm).
+    unmoved: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,6 +155,8 @@ class SimulatedGroup:
         interruptions: Interruptions | None = None,
         researcher_rng: np.random.Generator | None = None,
         shares_keyfob: Callable[[], bool] = lambda: False,
+        p_unmoved_arm: float = 0.0,
+        unmoved_rng: np.random.Generator | None = None,
     ) -> None:
         """Children who press `keyfob` and move `servos`, believing `answers` (a toy per
         target); their researcher gives commands with `command`. Where the bags are is
@@ -198,6 +202,14 @@ class SimulatedGroup:
         # children are asked nothing for a moment), Kaspar asked for a grown-up, a step.
         self._window = asyncio.Event()
         self._state_since = -math.inf
+        # Step 2: how often the presser presses before anyone has moved the arm; drawn
+        # from its own stream, so the children's answers are the same whatever it is.
+        if not (math.isfinite(p_unmoved_arm) and 0.0 <= p_unmoved_arm <= 1.0):
+            raise TeacherError(
+                f"expected a probability in [0, 1], found {p_unmoved_arm!r}", "p_unmoved_arm"
+            )
+        self.p_unmoved_arm = p_unmoved_arm
+        self._unmoved_rng = unmoved_rng or np.random.default_rng(0)
 
     def __call__(self, event: GameEvent, info: dict[str, Any]) -> None:
         """Hear a game event and act on it, as the children or the researcher would."""
@@ -264,7 +276,7 @@ class SimulatedGroup:
 
     async def _press(
         self, action: str, who: str, *, trial: int | None = None, bag: int | None = None,
-        button: str = "", early: bool = False, check: bool = False,
+        button: str = "", early: bool = False, check: bool = False, unmoved: bool = False,
     ) -> None:  # fmt: skip
         self.narrate(f"{who} presses {action.upper()}")
         start = await self.keyfob.perform(action)
@@ -277,6 +289,7 @@ class SimulatedGroup:
                 trial, bag, button, action, gesture_downs(action, start),
                 asyncio.get_running_loop().time(), early, check,
                 withdrawn=self._waiting() and self._state_since <= start,
+                unmoved=unmoved,
             )
         )
 
@@ -446,16 +459,20 @@ class SimulatedGroup:
                 margin = (high - low) * 0.1
                 pose[joint] = float(self._room.uniform(low + margin, high - margin))
             self._bag_poses[len(self._bag_poses)] = pose
-        for joint, degrees in self._bag_poses[bag].items():
-            low, high = ranges[joint]
-            noise = float(self.rng.uniform(-SHOW_NOISE_DEG, SHOW_NOISE_DEG))
-            self.servos.push(joint, min(high, max(low, degrees + noise)))
-        self.narrate(f"a child moves Kaspar's arm towards bag {bag + 1}")
+        unmoved = bool(self.p_unmoved_arm) and self._unmoved_rng.random() < self.p_unmoved_arm
+        if unmoved:
+            self.narrate("nobody moves Kaspar's arm yet")
+        else:
+            for joint, degrees in self._bag_poses[bag].items():
+                low, high = ranges[joint]
+                noise = float(self.rng.uniform(-SHOW_NOISE_DEG, SHOW_NOISE_DEG))
+                self.servos.push(joint, min(high, max(low, degrees + noise)))
+            self.narrate(f"a child moves Kaspar's arm towards bag {bag + 1}")
         await asyncio.sleep(0.5)
         action = self.messiness.action("green", self.rng)
         if self._waiting() or self._asked != asked:
             return  # Kaspar waits (the request is asked again once resumed), or it is over
-        await self._press(action, "another child", bag=bag, button="green")
+        await self._press(action, "another child", bag=bag, button="green", unmoved=unmoved)
 
 
 def gesture_downs(action: str, start: float) -> tuple[float, ...]:

@@ -50,6 +50,7 @@ from kasparctl.game.records import (
     CommandRecord,
     FaultSource,
     PoseRecord,
+    PressRecord,
     TrialRecord,
 )
 from kasparctl.game.resume import Abandoned, resume_or_abandon
@@ -171,6 +172,8 @@ class DemoOptions:
     # The wall clock watched, its state recorded as the service records it (None: not
     # watched, as the demo's clock is simulated; a test injects one).
     clock: ClockWatch | None = None
+    # Step 2: the chance the presser presses green before anyone moved the arm.
+    p_unmoved_arm: float = 0.0
 
 
 @dataclass
@@ -194,6 +197,8 @@ class DemoResult:
     commands_taken_as_answers: int = 0
     # Answers the simulated children gave that the game did not take as they meant.
     answers_lost: int = 0
+    # Step 2: greens Kaspar refused because nobody had moved the arm (PressRecord.unmoved).
+    unmoved_arm_refused: int = 0
 
     def summary(self) -> dict[str, Any]:
         """The result as plain data (the demo's --json line)."""
@@ -314,6 +319,9 @@ class DemoRig(Generic[ServosT]):
             accidental_commands=accidental_commands(records, presses, self.researcher_actions),
             commands_taken_as_answers=commands_taken_as_answers(records, self.researcher_actions),
             answers_lost=len(lost_answers(records, presses, held_s(self.game.config))),
+            unmoved_arm_refused=sum(
+                isinstance(r, PressRecord) and isinstance(r.unmoved, str) for r in records
+            ),
         )
 
 
@@ -427,6 +435,8 @@ def assemble(
             interruptions=options.interruptions,
             shares_keyfob=lambda: researcher is None or not researcher.connected,
             researcher_rng=np.random.default_rng([options.seed, 5, progress]),
+            p_unmoved_arm=options.p_unmoved_arm,
+            unmoved_rng=np.random.default_rng([options.seed, 6, progress]),
             # The bags stay where they were put, whatever was interrupted.
             room=np.random.default_rng([options.seed, 4]),
             narrate=narrate,
@@ -548,10 +558,13 @@ def lost_answers(
         presses = [p for p in presses if not _held_for(p.action, held)]
     trials = [r for r in records if isinstance(r, TrialRecord)]
     shown = {r.at for r in records if isinstance(r, PoseRecord)}
+    # A press before anyone moved the arm is taken as meant when Kaspar refused it (or,
+    # after unmoved_arm_asks refusals, took it).
+    refused = {r.at for r in records if isinstance(r, PressRecord) and isinstance(r.unmoved, str)}
     lost = [
         f"bag {p.bag + 1} at {p.downs[0]:.3f}"
         for p in presses
-        if p.bag is not None and not shown.intersection(p.downs)
+        if p.bag is not None and not (shown | refused if p.unmoved else shown).intersection(p.downs)
     ]
     # Each press for Kaspar's check of the buttons is the press its record names.
     checked = {(r.pressed, r.at) for r in records if isinstance(r, ButtonCheckRecord)}

@@ -31,6 +31,7 @@ from kasparctl.config import BUILTIN_PROFILES, GameSettings, ProfileSettings, lo
 from kasparctl.learning.learner import LearnerError, LearnerParams
 from kasparctl.learning.study_stats import ProblemRecord, StudyStats
 from kasparctl.sim import tables
+from kasparctl.sim.design import DEFAULT_DESIGN_GROUPS, DesignAnswer, design
 from kasparctl.sim.power import DEFAULT_GROUPS, DEFAULT_STUDIES, Arm, PowerPoint, draw_power
 from kasparctl.sim.power import power_curve as simulate_power
 from kasparctl.sim.simulate import (
@@ -97,6 +98,9 @@ class Request:
     power: bool = False
     compare: tuple[str, tuple[str, str]] | None = None  # NAME and its two values
     design: Design = Design()
+    # --design TARGET: a profile for this many guesses per game, over this many groups each.
+    design_for: float | None = None
+    design_groups: int = DEFAULT_DESIGN_GROUPS
 
 
 @dataclass(frozen=True)
@@ -109,6 +113,8 @@ class Setup:
     teacher: Teacher | TeacherModel
     seed: int
     context: dict[str, Any]
+    # The game before the profile's greens to learn: what another profile's arm starts from.
+    base_game: GameSettings | None = None
 
 
 @dataclass(frozen=True)
@@ -194,9 +200,13 @@ class PowerAnswer:
 
 def answer(
     request: Request, watch: Watch | None = None
-) -> StudyAnswer | SweepAnswer | PowerAnswer:
+) -> StudyAnswer | SweepAnswer | PowerAnswer | DesignAnswer:
     """Check the request against the settings and run the simulation it asks for."""
     setup = prepare(request)
+    if request.design_for is not None:
+        base_game = setup.base_game or setup.game
+        return design(request.design_for, base_game, setup.params, setup.teacher,
+                      request.design_groups, setup.seed)  # fmt: skip
     if request.power:
         return _power(request, setup)
     if request.sweep:
@@ -219,7 +229,9 @@ def prepare(request: Request) -> Setup:
         game = msgspec.structs.replace(game, variant=request.variant)
     if request.exclude_learned is not None:
         game = msgspec.structs.replace(game, exclude_learned_rule=request.exclude_learned)
-    game = playable(game)
+    base_game = playable(game)
+    # The profile's greens to learn over the game's (name is known: learner() checked it).
+    game = playable(profiles[name].shaped(game))
     _check_size(request, game)
     seed = request.seed if request.seed is not None else config_seed
     if seed is None:
@@ -237,6 +249,7 @@ def prepare(request: Request) -> Setup:
         "alpha": params.alpha,
         "beta": params.beta,
         "gamma": params.gamma,
+        "correct_answers_to_learn": game.correct_answers_to_learn,
         "p_wrong_green": simple.p_wrong_green,
         "p_wrong_red": simple.p_wrong_red,
         "p_no_answer": simple.p_no_answer,
@@ -244,7 +257,7 @@ def prepare(request: Request) -> Setup:
     }
     if isinstance(teacher, TeacherModel):
         context["teacher"] = request.teacher
-    return Setup(game, params, profiles, teacher, seed, context)
+    return Setup(game, params, profiles, teacher, seed, context, base_game)
 
 
 def learner(
@@ -292,6 +305,12 @@ def _children(request: Request) -> Teacher | TeacherModel:
 
 def _check_size(request: Request, game: GameSettings) -> None:
     """Refuse work no run should take hours or gigabytes for, saying what to do instead."""
+    if request.design_for is not None:
+        given = [name for name, value in (("--power", request.power), ("--sweep", request.sweep),
+                 ("--recover", request.recover), ("--compare", request.compare)) if value]
+        if given:
+            raise OptionError(f"--design: cannot be combined with {', '.join(given)}")
+        return
     if request.recover and (request.power or request.sweep):
         raise OptionError("--recover: only the scalar simulator plays it, not --power or --sweep")
     if request.power:
@@ -390,8 +409,9 @@ def arm(name: str, value: str, setup: Setup) -> Arm:
         if value not in setup.profiles:
             known = ", ".join(sorted(setup.profiles))
             raise OptionError(f"--compare: profile: expected one of {known}, found {value!r}")
-        chosen = setup.profiles[value].params()
-        return Arm(label, game, dataclasses.replace(chosen, gamma=params.gamma), teacher)
+        profile = setup.profiles[value]
+        chosen = dataclasses.replace(profile.params(), gamma=params.gamma)
+        return Arm(label, playable(profile.shaped(setup.base_game or game)), chosen, teacher)
     if name == "teacher":
         return Arm(label, game, params, load_teacher(value))
     if name == "exclude_learned":

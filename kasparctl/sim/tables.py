@@ -88,7 +88,9 @@ def study(stats: StudyStats, context: Mapping[str, Any], toys: int, targets: int
         f"{context['groups']} groups x {targets} problems ({context['variant']}, {toys} toys), "
         f"seed {context['seed']}",
         f"learner: {context['profile']} (alpha {context['alpha']:g}, beta {context['beta']:g}, "
-        f"gamma {context['gamma']:g}); teacher: {_children(context)}",
+        f"gamma {context['gamma']:g}, {context['correct_answers_to_learn']} greens to learn); "
+        f"teacher: {_children(context)}",
+        f"guesses per game: {stats.trials_total / context['groups']:.2f}",
         "",
         f"{'':34} {'simulated':>16} {'paper' if pilot else '':>14}".rstrip(),
     ]
