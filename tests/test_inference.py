@@ -15,6 +15,7 @@ from kasparctl.research.inference import (
     _batch_seeds,
     compare,
     estimates,
+    expansion,
     holm,
 )
 from kasparctl.research.student_t import quantile, two_sided_p
@@ -89,6 +90,33 @@ def test_no_interval_below_the_minimum_number_of_clusters() -> None:
         assert c.hedges_g.low is None and c.p is None
     num, den = rng.integers(0, 5, (MIN_CLUSTERS, 1)).astype(float), np.full((MIN_CLUSTERS, 1), 5.0)
     assert estimates(num, den, 500, 0, "s")[0].low is not None
+
+
+def test_a_condition_interval_is_stretched_for_few_clusters() -> None:
+    """A percentile bootstrap over k clusters is too narrow: its half-widths are stretched
+    by sqrt(k/(k-1)) t(k-1)/z for equal clusters (more when one cluster weighs more), and
+    the result stays where a share can be."""
+    z = quantile(0.975, 1e9)
+    equal = np.full(4, 10.0)
+    assert expansion(np.array([2.0, 5.0, 7.0, 4.0]), equal) == pytest.approx(
+        np.sqrt(4 / 3) * quantile(0.975, 3) / z, rel=1e-9
+    )
+    # Unequal sizes: the heavy cluster's residual counts for more.
+    assert expansion(np.array([2.0, 5.0, 35.0, 4.0]), np.array([10.0, 10.0, 50.0, 10.0])) > (
+        np.sqrt(4 / 3) * quantile(0.975, 3) / z
+    )
+    # Rows without data do not count as clusters.
+    assert expansion(np.array([2.0, 5.0, 7.0, 4.0, 0.0]), np.append(equal, 0.0)) == pytest.approx(
+        expansion(np.array([2.0, 5.0, 7.0, 4.0]), equal)
+    )
+    num, den = np.array([[0.0], [0.0], [0.0], [1.0]]), np.full((4, 1), 20.0)
+    plain = estimates(num, den, 2000, 0, "s")[0]
+    bounded = estimates(num, den, 2000, 0, "s", (np.zeros(1), np.ones(1)))[0]
+    assert plain.low is not None and plain.low < 0  # stretched past what a share can be
+    assert bounded.low == 0.0 and bounded.high == plain.high
+    # Four rows, but only three with data for the column: no interval.
+    three = estimates(np.array([[1.0], [2.0], [3.0], [0.0]]), np.array([[5.0], [5.0], [5.0], [0.0]]), 500, 0, "s")[0]
+    assert three.value == pytest.approx(0.4) and three.low is None
 
 
 def test_hedges_g_points_the_way_its_difference_does() -> None:
@@ -250,3 +278,19 @@ def test_coverage_and_false_positives_with_the_fewest_clusters(paired: bool) -> 
         false_positives += contrast_of(null_side, 0, seed).p < 0.05  # type: ignore[operator]
     assert 0.92 <= covered / studies <= 0.98
     assert 0.03 <= false_positives / studies <= 0.07
+
+
+@pytest.mark.slow
+def test_a_condition_interval_covers_with_the_fewest_clusters() -> None:
+    """One condition, 4 groups: its rate's interval covers the true rate in 92-98 % of
+    1,000 studies (the plain percentile interval covered about 78 %)."""
+    rng = np.random.default_rng(44)
+    covered = 0
+    studies = 1000
+    for seed in range(studies):
+        levels = rng.normal(0.45, 0.1, 4)
+        sizes = rng.integers(5, 31, 4).astype(float)
+        right = rng.binomial(sizes.astype(int), np.clip(levels, 0, 1)).astype(float)
+        (estimate,) = estimates(right[:, None], sizes[:, None], 500, seed, "one")
+        covered += estimate.low <= 0.45 <= estimate.high  # type: ignore[operator]
+    assert 0.92 <= covered / studies <= 0.98
