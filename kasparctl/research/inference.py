@@ -2,21 +2,24 @@
 
 Trials of one group are not independent (the same children, the same robot,
 one learner per problem), so a trial-level interval would be far too narrow.
-Every interval here is a cluster bootstrap: the clusters (groups of
+A condition's intervals are a cluster bootstrap: the clusters (groups of
 children, or sessions; children for the per-child measures) are resampled
 with replacement, and each statistic is recomputed from the resampled
-clusters' totals (a ratio of sums, as the point estimate is). 95 %
-percentile intervals from B resamples (2,000 by default, seeded, so a report
-is reproducible).
+clusters' totals (a ratio of sums, as the point estimate is); the 95 %
+percentile interval from B resamples (2,000 by default, seeded, so a report
+is reproducible) is stretched for its number of clusters (`expansion`), as a
+bootstrap over few clusters is too narrow.
 
-A contrast between two conditions resamples each condition's clusters
-independently, or, when a cluster meets both sides, the union of clusters with
-one set of weights (a paired cluster bootstrap, with the order reported). It
-gives the difference (in the measure's own unit) with its interval, Hedges' g
-(that same difference over the pooled SD of the clusters' own values,
-small-sample corrected) with its interval, and a bootstrap p, Holm-adjusted
-over a report's contrasts (`holm`). Children are resampled with their groups.
-Below MIN_CLUSTERS clusters (a side) there is no interval (None).
+A contrast between two conditions is a cluster-level t: the difference's CR2
+cluster-robust standard error with Satterthwaite's degrees of freedom (k - 1
+when the same clusters meet both sides, a paired analysis, with the order
+reported; Welch's for independent clusters). It gives the difference (in the
+measure's own unit) with its interval, Hedges' g (that same difference over
+the pooled SD of the clusters' own values, small-sample corrected) with the
+interval in those units, and the t's p, Holm-adjusted over a report's
+contrasts (`holm`). Children go with their groups. Below MIN_CLUSTERS clusters
+with data (a side) there is no interval (None). The coverage and false
+positives, 4 to 20 clusters: bench/bench_inference.py.
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ LEVEL = 0.95
 DEFAULT_REPLICATES = 2000
 DEFAULT_SEED = 0
 # Below this many clusters (on a side of a contrast) no interval is given: a bootstrap over
-# two clusters has three outcomes, over three ten; its percentiles are not a 95 % interval.
+# two clusters has three outcomes, over three ten, and a t with 1 or 2 df is all tail.
 MIN_CLUSTERS = 4
 
 
