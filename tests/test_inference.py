@@ -137,6 +137,10 @@ def test_hedges_g_points_the_way_its_difference_does() -> None:
         sides, _answers = study(rng, 6, float(rng.normal(0, 0.1)))
         c = contrast_of(sides, 300, 0)
         assert np.sign(c.hedges_g.value) == np.sign(c.difference.value)
+        # g's interval is the difference's in SD units: it excludes 0 exactly when that does.
+        scale = c.hedges_g.value / c.difference.value  # type: ignore[operator]
+        assert c.hedges_g.low == pytest.approx(c.difference.low * scale)  # type: ignore[operator]
+        assert c.hedges_g.high == pytest.approx(c.difference.high * scale)  # type: ignore[operator]
 
 
 def test_a_group_in_both_conditions_is_resampled_as_a_pair() -> None:
