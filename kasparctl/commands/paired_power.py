@@ -1,9 +1,9 @@
 """`simulate --power --paired`: within-group studies, analysed by the report's own inference.
 
 The simulation is kasparctl.sim.paired's; each simulated study's analysis is
-kasparctl.research.inference.compare, the paired cluster bootstrap the report
-applies to groups that met both conditions (its seed and salt, so each study is
-analysed exactly as `kasparctl report` would analyse it). This module only joins
+kasparctl.research.inference.compare, the paired cluster t (CR2, k - 1 degrees
+of freedom) the report applies to groups that met both conditions, so each study
+is analysed exactly as `kasparctl report` would analyse it. This module only joins
 the two rooms, which may not import each other.
 """
 
@@ -15,8 +15,7 @@ from kasparctl.sim.request import Request, arm, prepare
 from kasparctl.sim.simulate import OptionError
 from kasparctl.sim.studies import GROUP_MEASURES
 
-# Resamples per simulated study: a p near 0.05 from 500 is within about 0.01 of the
-# report's 2,000, at a quarter of the time.
+# Passed on to compare, which since its cluster t draws no resamples for a contrast.
 REPLICATES = 500
 
 

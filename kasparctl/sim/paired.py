@@ -4,9 +4,9 @@
 arm A and arm B, half of them A first (groups alternate: the first A first, the
 second B first...), as `kasparctl plan` counterbalances them. Each simulated
 study is analysed as the report analyses a real one: the caller passes the
-analysis (`Analysis`: the report's paired cluster bootstrap,
-kasparctl.research.inference.compare, with each group's two sessions resampled
-together), and power is the share of studies whose p is below the level.
+analysis (`Analysis`: the report's paired cluster t,
+kasparctl.research.inference.compare, with each group's two sessions entering
+its one contribution together), and power is the share of studies whose p is below the level.
 
 An order effect is optional: a group's second session is `order_effect` higher
 on the measure (in its own unit: trials, a share, bits), as children who know
@@ -218,7 +218,7 @@ class PairedAnswer:
         """What was compared and how."""
         return (
             f"{self.labels[0]} vs {self.labels[1]}, each group in both: {self.measure} "
-            f"(paired cluster bootstrap, level {self.level:g})"
+            f"(the report's paired cluster t, level {self.level:g})"
         )
 
     def plain(self) -> dict[str, Any]:
@@ -229,7 +229,7 @@ class PairedAnswer:
             "measure": self.measure,
             "level": self.level,
             "studies": self.studies,
-            "bootstrap_replicates": self.replicates,
+            "replicates": self.replicates,
             "order_effect": self.order_effect,
             "seed": self.seed,
             "variant": self.game.variant,
@@ -244,8 +244,8 @@ class PairedAnswer:
         ) else ""
         lines = [
             f"power: {self.title}",
-            f"{self.studies} simulated studies per design, {self.replicates} bootstrap "
-            f"resamples each, seed {self.seed}; {game.variant}, {len(game.targets)} targets, "
+            f"{self.studies} simulated studies per design, "
+            f"seed {self.seed}; {game.variant}, {len(game.targets)} targets, "
             f"{len(game.toys)} toys; measure: {self.measure_words}{order}",
             f"{'groups':>7} {'A first':>8} {'power':>7} {'MC error':>9} "
             f"{'mean difference (A - B)':>24} {'null rejected':>14} "
@@ -263,7 +263,7 @@ class PairedAnswer:
         else:
             lines.append(
                 f"80 % power from {enough.groups} groups, each playing both conditions "
-                f"(the report's bootstrap, which there rejects {enough.null_rate:.3f} of null "
+                f"(the report's cluster t, which there rejects {enough.null_rate:.3f} of null "
                 f"studies at level {self.level:g})"
             )
         by_t = next((p.groups for p in self.points if p.power_t >= 0.8), None)
