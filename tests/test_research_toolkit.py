@@ -210,7 +210,7 @@ def test_codes_missing_from_the_participants_file_are_warned(
     out = tmp_path / "t.csv"
     assert main(["export", "--state-dir", str(cohort.state_dir), "--csv", str(out), "--participants", str(partial)]) == 0
     assert "no row for P11, P12" in capsys.readouterr().err
-    assert {r["participant_group"] for r in read_csv(out) if r["participant"] == "P12"} == {""}
+    assert {r["participant_group"] for r in read_csv(out) if r["participant"] == "P12"} == {"NA"}
 
 
 # -- errors attributed -----------------------------------------------------------------

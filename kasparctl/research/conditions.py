@@ -93,13 +93,47 @@ class Condition:
         return list(dict.fromkeys(p.cluster for p in self.problems))
 
 
+def learner_key(session: SessionData) -> tuple[float, ...] | None:
+    """The learner's parameters frozen in the session's plan.json, as a key; None if none."""
+    params = session.learner_params()
+    return None if params is None else tuple(getattr(params, f) for f in _LEARNER_KEYS)
+
+
+_LEARNER_KEYS = ("alpha", "beta", "gamma", "reward_green", "reward_red", "initial_q")
+
+
+def learner_split(sessions: Sequence[SessionData]) -> dict[str, str]:
+    """Session uid -> the learner's mark in its condition's label, for profiles whose
+    sessions were recorded with different parameters under one name (a profile redefined
+    between sessions): those are different learners and are not pooled. "" for the rest."""
+    by_profile: dict[str, set[tuple[float, ...] | None]] = {}
+    for session in sessions:
+        by_profile.setdefault(session.profile, set()).add(learner_key(session))
+    marks: dict[str, str] = {}
+    for session in sessions:
+        key = learner_key(session)
+        if len(by_profile[session.profile]) < 2:
+            marks[session.uid] = ""
+        elif key is None:
+            marks[session.uid] = " [learner not recorded]"
+        else:
+            marks[session.uid] = f" [alpha {key[0]:g}, beta {key[1]:g}]" + (
+                "" if key[2:] == (0.0, 1.0, -1.0, 0.0) else " [other rewards]"
+            )
+    return marks
+
+
 def condition_labels(sessions: Sequence[SessionData]) -> list[str]:
-    """Each session's condition label; with the variant when the sessions mix variants."""
+    """Each session's condition label; with the variant when the sessions mix variants,
+    and with the learner's parameters when one profile name had several."""
     mixed = len({session.variant for session in sessions}) > 1
-    return [
-        f"{session.condition} ({session.variant})" if mixed else session.condition
-        for session in sessions
-    ]
+    marks = learner_split(sessions)
+    labels = []
+    for session in sessions:
+        profile, _, mode = session.condition.partition("/")
+        label = f"{profile}{marks[session.uid]}/{mode}" if marks[session.uid] else session.condition
+        labels.append(f"{label} ({session.variant})" if mixed else label)
+    return labels
 
 
 def cluster_of(session: SessionData, unit: str) -> str:
@@ -122,10 +156,12 @@ def by_condition(
     # A group marked absent was never taught: no session of any condition.
     sessions = [session for session in sessions if session.index.absent is None]
     labelled = list(zip(sessions, condition_labels(sessions), strict=True))
+    marks = learner_split(sessions)
     for index, (session, label) in enumerate(progress(labelled, "reading records", "session")):
+        profile = session.profile + marks[session.uid]
         condition = conditions.setdefault(
             label,
-            Condition(label, Factors(session.profile, session.uncertainty, session.variant)),
+            Condition(label, Factors(profile, session.uncertainty, session.variant)),
         )
         condition.sessions.append(session)
         _collect(session, index, condition, params, children, cluster_of(session, cluster_unit))
@@ -141,7 +177,10 @@ def _collect(
     cluster: str,
 ) -> None:
     toys = session.toys
-    builder = ProblemBuilder(toys, session.answer_key, params(session.profile), group=index)
+    # The learner the session really had (frozen in plan.json); the configuration's
+    # profile only for sessions recorded before it was frozen.
+    learner = session.learner_params() or params(session.profile)
+    builder = ProblemBuilder(toys, session.answer_key, learner, group=index)
     feedback = condition.feedback_by_cluster.setdefault(cluster, Feedback())
     ended_with = None
     for walked in walk(session):
