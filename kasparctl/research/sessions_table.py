@@ -10,13 +10,15 @@ None there (NA in a CSV).
 
 from __future__ import annotations
 
+import csv
 import json
 from collections.abc import Sequence
 from typing import Any
 
 from kasparctl.research import codebook
 from kasparctl.research.catalogue import SessionData
-from kasparctl.research.tidy import learner_columns
+from kasparctl.research.output import text_output
+from kasparctl.research.tidy import cell, learner_columns
 
 # The settings columns: plan.json's settings key (a voice key within settings.voice).
 _SETTINGS = tuple(
@@ -69,3 +71,14 @@ def sessions_header() -> list[str]:
 def session_rows(sessions: Sequence[SessionData]) -> list[dict[str, Any]]:
     """Every session's row, in the catalogue's order."""
     return [session_row(session) for session in sessions]
+
+
+def write_sessions(target: str, sessions: Sequence[SessionData]) -> int:
+    """sessions.csv ("-": stdout); returns the number of rows."""
+    header = sessions_header()
+    with text_output(target) as stream:
+        writer = csv.writer(stream, lineterminator="\n")
+        writer.writerow(header)
+        for row in session_rows(sessions):
+            writer.writerow([cell(row[column]) for column in header])
+    return len(sessions)
