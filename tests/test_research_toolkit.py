@@ -240,7 +240,7 @@ def test_each_perseverative_error_and_win_shift_has_its_cause(cohort: Cohort, tm
     for uid, (_, records) in raw(cohort.state_dir).items():
         causes = expected_causes(records)
         for row in (r for r in rows if r["session"] == uid):
-            assert row["error_cause"] == causes.get(int(row["trial"]), "")
+            assert row["error_cause"] == causes.get(int(row["trial"]), "NA")
             seen.add(row["error_cause"])
     # The cohort's children err: both causes occur.
     assert {"exploratory", "after_wrong_feedback"} <= seen

@@ -25,7 +25,7 @@ from kasparctl.learning.learner import LearnerParams
 from kasparctl.learning.session_stats import ProblemBuilder
 from kasparctl.learning.study_stats import ProblemRecord, StudyStats, summarise
 from kasparctl.research.catalogue import SessionData
-from kasparctl.research.children import Children, Feedback
+from kasparctl.research.children import Children, Feedback, in_question
 from kasparctl.research.progress import progress
 from kasparctl.research.walk import walk
 
@@ -69,8 +69,11 @@ class Condition:
     # By place in the turn order (child 1, 2...), over every session: the plan's own view.
     feedback_by_position: dict[int, Feedback] = field(default_factory=dict)
     undone: int = 0
-    # Seconds from each counted question's end to its answer; prompts while guessing.
+    # Seconds from each counted question's end to its answer, for answers after the
+    # question (research.children.in_question: those in its last words are counted apart);
+    # prompts while guessing.
     reaction_times: list[float] = field(default_factory=list)
+    answers_in_question: int = 0
     prompts: int = 0
 
     @cached_property
@@ -195,7 +198,10 @@ def _collect(
             guess = walked.guess
             builder.add(record, None if guess is None else (guess.perseverative, guess.win_shift))
             feedback.add(record)
-            condition.reaction_times.append(record.reaction_time)
+            if in_question(record):
+                condition.answers_in_question += 1
+            else:
+                condition.reaction_times.append(record.reaction_time)
             condition.feedback_by_position.setdefault(record.child_index + 1, Feedback()).add(
                 record
             )
@@ -225,6 +231,7 @@ def pooled(conditions: Sequence[Condition], label: str = "all") -> Condition:
         everything.problems.extend(condition.problems)
         everything.undone += condition.undone
         everything.reaction_times.extend(condition.reaction_times)
+        everything.answers_in_question += condition.answers_in_question
         everything.prompts += condition.prompts
         for cluster, counts in condition.feedback_by_cluster.items():
             everything.feedback_by_cluster.setdefault(cluster, Feedback()).merge(counts)

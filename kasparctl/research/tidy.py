@@ -28,6 +28,7 @@ from kasparctl.game.records import TrialRecord
 from kasparctl.research import codebook
 from kasparctl.research.anonymise import NO_PSEUDONYMS, Pseudonyms
 from kasparctl.research.catalogue import SessionData
+from kasparctl.research.children import in_question
 from kasparctl.research.output import text_output
 from kasparctl.research.participants import NO_PARTICIPANTS, Participants
 from kasparctl.research.progress import progress
@@ -164,7 +165,7 @@ def trial_rows(
             "reaction_time": trial.reaction_time,
             # Answered in the question's last words; negative times recorded before the
             # flag existed are such answers too.
-            "in_question": trial.in_question is True or trial.reaction_time < 0,
+            "in_question": in_question(trial),
             "reward": trial.reward,
             # As the records read (kasparctl.game.fold), like the report's counts.
             "perseverative": guess.perseverative,
