@@ -177,3 +177,51 @@ def test_the_session_clock_runs_on_across_a_resume(study: Study, tmp_path: Path)
         assert any(b < a for a, b in itertools.pairwise(clocks)), "clock restarts"
         assert session_clocks[0] == 0.0
         assert all(b >= a for a, b in itertools.pairwise(session_clocks))
+
+
+# -- item 3: the names game's statistics beside the paper's -----------------------------
+
+
+def test_names_game_first_guesses_and_entropy_leave_forced_choices_out(
+    state: Path, tmp_path: Path
+) -> None:
+    trials = tmp_path / "trials.csv"
+    assert main(["export", "--state-dir", str(state), "--csv", str(trials)]) == 0
+    firsts = [r for r in rows_of(trials)
+              if r["problem_trial"] == "1" and r["undone"] == "FALSE" and r["variant"] == "names"]
+    forced = [r for r in firsts if r["n_candidates"] == "1"]
+    chosen = [r for r in firsts if r["n_candidates"] != "1"]
+    # Right by elimination, unless a name learned wrongly elsewhere withdrew the right toy.
+    assert forced and all((r["correct"] == "TRUE") == (r["right_toy_offered"] == "TRUE")
+                          for r in forced)
+    summary = report(state, tmp_path / "report")
+    (names,) = [c for c in summary["conditions"] if c["condition"].endswith("(names)")]
+    assert names["problems_forced"] == len(forced)
+    assert names["problems_with_a_choice"] == len(chosen)
+    assert names["first_guess_correct_with_a_choice"] == sum(r["correct"] == "TRUE" for r in chosen)
+    assert names["first_guess_correct"] == sum(r["correct"] == "TRUE" for r in firsts)
+    mean = sum(float(r["entropy"]) for r in chosen) / len(chosen)
+    assert names["initial_entropy_with_a_choice"] == pytest.approx(mean)
+    assert names["initial_entropy"] < names["initial_entropy_with_a_choice"]
+    text = (tmp_path / "report" / "summary.md").read_text()
+    assert "**Forced choices.**" in text
+    assert "| First guess correct, all problems |" in text
+    assert "| First guess correct, problems with a choice (forced ones left out) |" in text
+
+
+def test_the_contrast_table_shows_holms_p_and_the_pairing() -> None:
+    from kasparctl.research.summary import _contrast_table
+
+    contrast = {
+        "factor": "uncertainty mode", "a": "paper/spoken", "b": "paper/silent",
+        "measure": "trials_mean", "a_value": 5.0, "b_value": 6.0, "difference": -1.0,
+        "difference_low": -1.8, "difference_high": -0.2, "hedges_g": -0.9,
+        "hedges_g_low": -1.6, "hedges_g_high": -0.1, "clusters_a": 6, "clusters_b": 6,
+        "unit": "group", "paired": True, "shared_clusters": 6, "p": 0.004, "p_holm": 0.012,
+        "significant_holm": True, "order_a_first": 3, "order_b_first": 3,
+    }
+    header, _, row = _contrast_table([contrast])
+    assert "| p | p (Holm) | design |" in header
+    assert "| 0.004 | 0.012 * | paired (6 shared; A first 3, B first 3) |" in row
+    alone = {**contrast, "paired": False, "p": None, "p_holm": None, "significant_holm": False}
+    assert "| - | - | independent |" in _contrast_table([alone])[2]

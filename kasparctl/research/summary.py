@@ -56,7 +56,7 @@ def feedback_counts(condition: Condition) -> dict[str, Any]:
 def with_a_choice(condition: Condition) -> dict[str, Any]:
     """The first-guess and entropy statistics over the problems with a choice: in the names
     game a learned name is withdrawn from the later bags, so the last bag is offered one
-    toy, its first guess forced (right by elimination) and its entropy 0 bits. Left out,
+    toy, its first guess forced (no choice) and its entropy 0 bits. Left out,
     the figures compare with the pilot's, where every problem offers every toy."""
     chosen = [p.record for p in condition.problems if p.record.candidates != 1]
     stats = summarise(chosen) if chosen else None
@@ -260,6 +260,16 @@ def _rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
             else "no answer key",
         ),
         (
+            "First guess correct, problems with a choice (forced ones left out)",
+            _share(
+                s["first_guess_correct_with_a_choice"],
+                s["problems_with_a_choice_and_answer_key"],
+            )
+            + f"; {s['problems_forced']} forced"
+            if s["problems_with_a_choice_and_answer_key"]
+            else f"no answer key; {s['problems_forced']} forced",
+        ),
+        (
             "Perseverative errors",
             _share(s["perseverative_errors"], s["trials_total"])
             + _interval(ci["perseverative_error_rate"], share=True)
@@ -270,16 +280,6 @@ def _rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
             _share(s["win_shifts"], s["trials_total"])
             + _interval(ci["win_shift_rate"], share=True)
             + attributed(s["win_shifts_after_wrong_feedback"], s["win_shifts_exploratory"]),
-        ),
-        (
-            "First guess correct, problems with a choice (forced ones left out)",
-            _share(
-                s["first_guess_correct_with_a_choice"],
-                s["problems_with_a_choice_and_answer_key"],
-            )
-            + f"; {s['problems_forced']} forced"
-            if s["problems_with_a_choice_and_answer_key"]
-            else f"no answer key; {s['problems_forced']} forced",
         ),
         ("Entropy before the first guess (bits), all problems", _number(s["initial_entropy"], 3)),
         (
@@ -479,12 +479,15 @@ def _forced_caveat(summary: dict[str, Any]) -> list[str]:
         return []
     return [
         "**Forced choices.** In the names game a learned name is no longer offered for the "
-        "other bags, so the last bag has one candidate: its first guess is right by "
-        f"elimination and its entropy 0 bits ({summary['all']['problems_forced']} such "
+        "other bags, so the last bag has one candidate: its first guess is no choice (right "
+        "by elimination, unless a name learned wrongly withdrew the right toy) and its "
+        f"entropy 0 bits ({summary['all']['problems_forced']} such "
         "problems here). The figures over all problems are therefore not comparable with the "
         "paper's pilot, where every toy was offered for every location (2.585 bits before "
         "each first guess with six toys); the rows *problems with a choice* leave the forced "
-        "problems out and are the comparable ones.",
+        "problems out and are the comparable ones. Even with a choice the later bags offer "
+        "fewer toys, so their \"no idea\" is log2 of fewer (entropy_by_trial draws a line for "
+        "each number of toys offered).",
         "",
     ]
 
