@@ -27,7 +27,7 @@ from kasparctl.learning.study_stats import ProblemRecord, StudyStats, summarise
 from kasparctl.research.catalogue import SessionData
 from kasparctl.research.children import Children, Feedback, in_question
 from kasparctl.research.progress import progress
-from kasparctl.research.walk import walk
+from kasparctl.research.walk import AFTER_WRONG_FEEDBACK, EXPLORATORY, walk
 
 # What a cluster is: the group of children (the paper's unit: groups came back for
 # more sessions), or the session.
@@ -196,7 +196,12 @@ def _collect(
             if len(record.q_after) != len(toys):
                 continue  # damage the index warned about
             guess = walked.guess
-            builder.add(record, None if guess is None else (guess.perseverative, guess.win_shift))
+            if guess is None:
+                builder.add(record)
+            else:
+                # The flags and their cause as the fold reads them: the CSV's columns.
+                cause = {AFTER_WRONG_FEEDBACK: True, EXPLORATORY: False}.get(guess.cause or "")
+                builder.add(record, (guess.perseverative, guess.win_shift), cause)
             feedback.add(record)
             if in_question(record):
                 condition.answers_in_question += 1
