@@ -176,7 +176,8 @@ def test_report_is_what_it_was(tmp_path: Path) -> None:
     text = (tmp_path / "summary.md").read_text()
     assert "| Trials | 27 | 15 | 42 |" in text
     assert "| Trials to learn, mean ± sd | 3.14 ± 1.35" in text
-    assert "| First guess correct | 3 of 8 (37.5 %)" in text
+    # Labelled now as over all problems, beside the problems with a choice (issue 27).
+    assert "| First guess correct, all problems | 3 of 8 (37.5 %)" in text
 
 
 def test_session_list_is_what_it_was(capsys: pytest.CaptureFixture[str]) -> None:
