@@ -35,3 +35,14 @@ REQUIRED_COMMANDS = (Command.NEXT, Command.PAUSE, Command.STOP)
 # The most children a group may have (the paper's groups had two or three). A child
 # without a first name is called by the phrase book's names.child ("child 2").
 MAX_CHILDREN = 6
+
+# Cells that R (read.csv: "NA"; readr: "" and "NA") or pandas (read_csv's default
+# na_values) read as missing. A code or a name that is one of them would come back as a
+# missing value in an analysis, so the configuration refuses them, and an export writes
+# any such text recorded before with a leading "'" (kasparctl.research.tidy.cell).
+MISSING_MARKERS = frozenset(
+    {
+        "", "#N/A", "#N/A N/A", "#NA", "-1.#IND", "-1.#QNAN", "-NaN", "-nan", "1.#IND",
+        "1.#QNAN", "<NA>", "N/A", "NA", "NULL", "NaN", "None", "n/a", "nan", "null",
+    }
+)

@@ -89,13 +89,14 @@ def test_columns_and_types_are_as_documented(study: Study, tmp_path: Path) -> No
         for name in expand([column.name]):
             for row in rows:
                 value = row[name]
-                if value == "":
+                if value == "NA":
                     assert column.empty_when != "never", (name, row["session_name"], row["trial"])
                     continue
                 assert is_type(value, column.type), (name, value)
     # Silent sessions have no band; spoken ones always do.
-    assert {r["band"] == "" for r in rows if r["speak_uncertainty"] == "FALSE"} == {True}
-    assert "" not in {r["band"] for r in rows if r["speak_uncertainty"] == "TRUE"}
+    assert {r["band"] == "NA" for r in rows if r["speak_uncertainty"] == "FALSE"} == {True}
+    assert "NA" not in {r["band"] for r in rows if r["speak_uncertainty"] == "TRUE"}
+    assert "" not in {value for row in rows for value in row.values()}
 
 
 def test_values_are_the_records_own(study: Study, tmp_path: Path) -> None:
@@ -161,7 +162,7 @@ def test_events_hold_every_other_record_as_documented(study: Study, tmp_path: Pa
     assert header == [c.name for c in documented]
     for column in documented:
         for row in rows:
-            if row[column.name] == "":
+            if row[column.name] == "NA":
                 assert column.empty_when != "never", (column.name, row)
             else:
                 assert is_type(row[column.name], column.type), (column.name, row[column.name])
@@ -182,7 +183,7 @@ def test_events_hold_every_other_record_as_documented(study: Study, tmp_path: Pa
 def test_the_csv_can_go_to_stdout(study: Study, capsys) -> None:
     assert main(["export", "--state-dir", str(study.state_dir), "--csv", "-"]) == 0
     captured = capsys.readouterr()
-    assert captured.out.startswith("session,session_name,robot,group,condition,")
+    assert captured.out.startswith("session,session_name,robot,robot_name,group,session_number,")
     assert "trials from 6 sessions" in captured.err
 
 

@@ -210,7 +210,7 @@ def test_codes_missing_from_the_participants_file_are_warned(
     out = tmp_path / "t.csv"
     assert main(["export", "--state-dir", str(cohort.state_dir), "--csv", str(out), "--participants", str(partial)]) == 0
     assert "no row for P11, P12" in capsys.readouterr().err
-    assert {r["participant_group"] for r in read_csv(out) if r["participant"] == "P12"} == {""}
+    assert {r["participant_group"] for r in read_csv(out) if r["participant"] == "P12"} == {"NA"}
 
 
 # -- errors attributed -----------------------------------------------------------------
@@ -240,7 +240,7 @@ def test_each_perseverative_error_and_win_shift_has_its_cause(cohort: Cohort, tm
     for uid, (_, records) in raw(cohort.state_dir).items():
         causes = expected_causes(records)
         for row in (r for r in rows if r["session"] == uid):
-            assert row["error_cause"] == causes.get(int(row["trial"]), "")
+            assert row["error_cause"] == causes.get(int(row["trial"]), "NA")
             seen.add(row["error_cause"])
     # The cohort's children err: both causes occur.
     assert {"exploratory", "after_wrong_feedback"} <= seen

@@ -128,7 +128,14 @@ def as_written_then(path: Path) -> tuple[str, list[dict[str, str]]]:
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(header)
     for row in rows:
-        then = {**row, "session": row["session_name"]}
+        # Written then: an empty cell for a missing value (NA now), no trial on a prompt
+        # (the question it repeated, now), non-ASCII escaped in the detail.
+        then = {k: "" if v == "NA" else v for k, v in row.items()}
+        then["session"] = row["session_name"]
+        if then.get("kind") == "prompt":
+            then["trial"] = ""
+        if then.get("detail"):
+            then["detail"] = json.dumps(json.loads(then["detail"]), sort_keys=True)
         writer.writerow([then[column] for column in header])
     return buffer.getvalue(), rows
 
@@ -144,14 +151,14 @@ def test_export_is_what_it_was(tmp_path: Path, anonymise: bool) -> None:
         assert then == (EXPECTED / f"{expected}{suffix}.csv").read_text()
         for row in rows:
             assert row["session"] == DERIVED_UIDS[row["session_name"]]
-            assert row["robot"] == "" and row["participant"] == ""
+            assert row["robot"] == "NA" and row["participant"] == "NA"
             # Planned before scripts: the five varied bands, with the words of then.
             assert (row["script"], row["script_version"]) == ("varied", "0")
             assert row["language"] == "en"  # planned before languages were recorded
     _, rows = as_written_then(trials)
     flagged = [r for r in rows if "TRUE" in (r["perseverative"], r["win_shift"])]
     assert flagged and all(r["error_cause"] in ("exploratory", "after_wrong_feedback") for r in flagged)
-    assert {r["error_cause"] for r in rows if r not in flagged} == {""}
+    assert {r["error_cause"] for r in rows if r not in flagged} == {"NA"}
 
 
 def test_report_is_what_it_was(tmp_path: Path) -> None:
@@ -169,7 +176,8 @@ def test_report_is_what_it_was(tmp_path: Path) -> None:
     text = (tmp_path / "summary.md").read_text()
     assert "| Trials | 27 | 15 | 42 |" in text
     assert "| Trials to learn, mean ± sd | 3.14 ± 1.35" in text
-    assert "| First guess correct | 3 of 8 (37.5 %)" in text
+    # Labelled now as over all problems, beside the problems with a choice (issue 27).
+    assert "| First guess correct, all problems | 3 of 8 (37.5 %)" in text
 
 
 def test_session_list_is_what_it_was(capsys: pytest.CaptureFixture[str]) -> None:

@@ -135,7 +135,7 @@ def test_a_demo_in_each_mode_exported_and_reported_side_by_side(
             "none": "paper/silent",
         }[row["uncertainty"]]
         # The line is said only where the mode says it.
-        assert (row["band"] != "") == (row["uncertainty"] in ("spoken", "both"))
+        assert (row["band"] != "NA") == (row["uncertainty"] in ("spoken", "both"))
 
     report = tmp_path / "report"
     assert main(["report", "--state-dir", str(state), "--out", str(report),

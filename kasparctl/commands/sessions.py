@@ -20,6 +20,7 @@ from typing import Any
 
 from kasparctl.commands.arguments import add_sources
 from kasparctl.research.catalogue import Damaged, SessionData
+from kasparctl.research.sessions_table import session_row
 from kasparctl.research.source import read_sessions
 
 COLUMNS = (
@@ -47,18 +48,13 @@ def register(subparsers: Any) -> None:
 
 
 def describe(session: SessionData) -> dict[str, Any]:
-    """One session as a row of the listing."""
+    """One session as a row of the listing: the sessions table's row (research.codebook's
+    SESSIONS: robot, session number, kasparctl version, learner, settings...), what a
+    crash cost it, and its directory."""
     return {
-        **session.identity,
-        "created": session.created,
-        "date": session.date,
-        # Undone answers are not trials; they stay in the records and the export.
-        "trials": session.index.trials,
-        "undone": len(session.index.undone),
-        "status": session.status,
-        "resumed": session.resumed,
+        **session_row(session),
+        "speak_uncertainty": session.speak_uncertainty,
         "recovered": session.recovered,
-        "clock_synchronised": session.index.clock_synchronised,
         "directory": str(session.directory),
     }
 

@@ -18,7 +18,7 @@ from kasparctl.config.poses import check_pose
 from kasparctl.config.schema import SPOKEN_MODES, Config, GameSettings, LearnerSettings, SessionPlan
 from kasparctl.learning.learner import LearnerError
 from kasparctl.lexicon import LexiconError, words
-from kasparctl.vocabulary import REQUIRED_COMMANDS, Command
+from kasparctl.vocabulary import MISSING_MARKERS, REQUIRED_COMMANDS, Command
 
 # Raises the ConfigError for a key and a message.
 _Fail = typing.Callable[[str, str], typing.NoReturn]
@@ -226,6 +226,9 @@ def _check_sessions(config: Config, fail: _Fail) -> None:
 def _check_plan(plan: SessionPlan, where: str, config: Config, fail: _Fail) -> None:
     _check_profile_name(config.learner, plan.profile, f"{where}.profile", fail)
     _check_word(plan.group, f"{where}.group", GROUP_CODE_LIMIT, fail)
+    _check_not_missing((plan.group,), f"{where}.group", "a group code", fail)
+    _check_not_missing(plan.children, f"{where}.children", "a first name", fail)
+    _check_not_missing(plan.participants, f"{where}.participants", "a participant code", fail)
     _check_words(plan.children, f"{where}.children", NAME_LIMIT, fail)
     _check_distinct(plan.children, f"{where}.children", fail)
     if plan.children and plan.group_size not in (None, len(plan.children)):
@@ -245,6 +248,17 @@ def _check_plan(plan: SessionPlan, where: str, config: Config, fail: _Fail) -> N
     if plan.answer_key:
         _check_answer_key(plan.answer_key, config.game, f"{where}.answer_key", fail)
     _check_uncertainty(plan, where, fail)
+
+
+def _check_not_missing(values: tuple[str, ...], key: str, what: str, fail: _Fail) -> None:
+    """No value that R or pandas would read back from a CSV as a missing value."""
+    for value in values:
+        if value.strip() in MISSING_MARKERS:
+            fail(
+                key,
+                f"expected {what} that R and pandas read as text, found {value!r} "
+                "(read back from a CSV as a missing value)",
+            )
 
 
 def _check_uncertainty(plan: SessionPlan, where: str, fail: _Fail) -> None:

@@ -105,13 +105,26 @@ class ProblemBuilder:
         self._last: dict[int, tuple[int | None, tuple[str, ...], tuple[float, ...]]] = {}
         self._candidates: dict[int, int] = {}
 
-    def add(self, trial: RecordedTrial, flags: tuple[bool, bool] | None = None) -> None:
+    def add(
+        self,
+        trial: RecordedTrial,
+        flags: tuple[bool, bool] | None = None,
+        after_wrong: bool | None = None,
+    ) -> None:
         """One trial that counts (undone ones are left out by the caller), in recorded order;
-        `flags` (perseverative, win_shift) as the records read, else the record's own."""
+        `flags` (perseverative, win_shift) as the records read, else the record's own;
+        `after_wrong` the fold's cause of such an error (True after wrong feedback, False
+        exploratory, None unknown), else the answer before it on this target decides."""
         target = trial.target_index
         perseverative, win_shift = (
             (trial.perseverative, trial.win_shift) if flags is None else flags
         )
+        if flags is None:
+            previous = self._trials.get(target, [])
+            last = previous[-1] if previous else None
+            after_wrong = (
+                None if last is None or last.correct is None else last.feedback != last.correct
+            )
         self._trials.setdefault(target, []).append(
             TrialRecord(
                 choice=trial.choice_index,
@@ -120,6 +133,7 @@ class ProblemBuilder:
                 correct=trial.correct,
                 perseverative=perseverative,
                 win_shift=win_shift,
+                after_wrong=after_wrong,
             )
         )
         self._candidates.setdefault(target, len(trial.candidates))

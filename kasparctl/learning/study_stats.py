@@ -62,6 +62,9 @@ class TrialRecord(msgspec.Struct, frozen=True, gc=False):
     # as a simulated problem is asked in one go.
     perseverative: bool | None = None
     win_shift: bool | None = None
+    # With the recorded flags, what the fold read the error followed: True after wrong
+    # feedback, False exploratory, None unknown (no answer key) or not an error.
+    after_wrong: bool | None = None
 
 
 class ProblemRecord(msgspec.Struct, frozen=True):
@@ -194,8 +197,12 @@ def count_errors(trials: Sequence[TrialRecord]) -> ErrorCounts:
         else:
             continue
         counts[kind] += 1
-        if previous.correct is not None:
-            wrong = previous.feedback != previous.correct
+        if current.perseverative is not None and current.win_shift is not None:
+            # Recorded: the cause as the fold read it, the CSV's error_cause.
+            wrong: bool | None = current.after_wrong
+        else:
+            wrong = None if previous.correct is None else previous.feedback != previous.correct
+        if wrong is not None:
             counts[kind + (2 if wrong else 4)] += 1
     return ErrorCounts(*counts)
 

@@ -14,11 +14,13 @@ the commands list it and go on with every other session.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import re
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import msgspec
 
@@ -35,6 +37,7 @@ from kasparctl.game.records import (
     UndoRecord,
 )
 from kasparctl.game.session import PLAN_FILE, RECORDS_FILE, never_started
+from kasparctl.learning.learner import LearnerError, LearnerParams
 from kasparctl.research.reader import Warnings, is_utf8, iter_records
 
 # plan.json is a few hundred bytes; one far larger is not a plan, and is not read whole.
@@ -61,13 +64,30 @@ class PlanEntry(msgspec.Struct, kw_only=True, frozen=True):
     answer_key: tuple[str, ...] = ()
 
 
+class RobotEntry(msgspec.Struct, kw_only=True, frozen=True):
+    """plan.json's `robot` since robots have names: its stable id and its name."""
+
+    id: str | None = None
+    name: str | None = None
+
+
 class PlanFile(msgspec.Struct, kw_only=True, frozen=True):
-    """plan.json: the session's names, when it started, its condition and its plan."""
+    """plan.json: the session's names, when it started, its condition and its plan.
+
+    Keys added over time are read when present and None (missing) otherwise.
+    """
 
     session: str | None = None
     # Written since sessions have ULIDs; older sessions get one derived from plan.json.
     uid: str | None = None
-    robot: str | None = None
+    # The robot's id (a string) before robots had names; {"id", "name"} since.
+    robot: str | RobotEntry | None = None
+    # The group's session number; the kasparctl that opened it; the learner frozen at the
+    # start (profile and parameters); every setting that shaped the session.
+    number: int | None = None
+    kasparctl_version: str | None = None
+    learner: dict[str, Any] | None = None
+    settings: dict[str, Any] | None = None
     created: str = ""
     # Its place among its state directory's sessions; 0 before sessions were numbered.
     sequence: int = 0
@@ -141,8 +161,57 @@ class SessionData:
 
     @property
     def robot(self) -> str:
-        """The robot that recorded it; empty for sessions older than robot ids."""
-        return self.meta.robot or ""
+        """The robot that recorded it (its stable id); empty for sessions older than ids."""
+        robot = self.meta.robot
+        if isinstance(robot, RobotEntry):
+            return robot.id or ""
+        return robot or ""
+
+    @property
+    def robot_name(self) -> str | None:
+        """The robot's name ([robot] name); None for sessions older than robot names."""
+        robot = self.meta.robot
+        return robot.name if isinstance(robot, RobotEntry) else None
+
+    @property
+    def number(self) -> int | None:
+        """The group's session number (1 for its first); None before sessions had one."""
+        return self.meta.number
+
+    @property
+    def kasparctl_version(self) -> str | None:
+        """The kasparctl that opened the session; None before it was recorded."""
+        return self.meta.kasparctl_version
+
+    @property
+    def settings(self) -> dict[str, Any] | None:
+        """Every setting that shaped the session (plan.json's `settings`), if recorded."""
+        return self.meta.settings
+
+    @property
+    def learner(self) -> dict[str, Any] | None:
+        """The learner frozen in plan.json at the start: `learner`, else `settings.learner`."""
+        if self.meta.learner is not None:
+            return self.meta.learner
+        settings = self.meta.settings or {}
+        learner = settings.get("learner")
+        return learner if isinstance(learner, dict) else None
+
+    def learner_params(self) -> LearnerParams | None:
+        """The parameters the session's learner really had, from plan.json; None when the
+        session recorded none (or ones the learner refuses: damage), so the caller falls
+        back to the profile of the configuration."""
+        frozen = self.learner
+        if frozen is None:
+            return None
+        names = {f.name for f in dataclasses.fields(LearnerParams)}
+        values = {k: v for k, v in frozen.items() if k in names}
+        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in values.values()):
+            return None
+        try:
+            return LearnerParams(**{k: float(v) for k, v in values.items()})
+        except (LearnerError, TypeError):
+            return None
 
     @property
     def plan(self) -> PlanEntry:
@@ -202,7 +271,9 @@ class SessionData:
             "session": self.uid,
             "session_name": self.name,
             "robot": self.robot,
+            "robot_name": self.robot_name,
             "group": self.group,
+            "session_number": self.number,
             "condition": self.condition,
             "profile": self.profile,
             "speak_uncertainty": self.speak_uncertainty,

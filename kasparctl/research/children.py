@@ -10,7 +10,11 @@ Measures, per child:
   answered, false reds (a red for a right guess) over the right ones, and
   all wrong answers over all checked (only where the plan has an answer key);
 - reaction time (end of Kaspar's question to the press), by the uncertainty
-  band Kaspar spoke before the guess ("silent" when it did not say);
+  band Kaspar spoke before the guess ("silent" when it did not say): the mean
+  and medians are over the answers given after the question; an answer pressed
+  in the question's last words (in_question: a negative time, the toy already
+  named) is counted apart, as `answers_in_question`, since its time measures
+  when the question ended, not how long the child took;
 - prompts needed (Kaspar asked again because nobody answered), extra presses
   after their answer, and their answers the researcher undid.
 """
@@ -26,6 +30,12 @@ from kasparctl.game.records import TrialRecord
 from kasparctl.research.catalogue import SessionData
 
 SILENT = "silent"
+
+
+def in_question(trial: TrialRecord) -> bool:
+    """Answered in the question's last words and taken (a negative reaction time; such
+    times recorded before the flag existed count too)."""
+    return trial.in_question is True or trial.reaction_time < 0
 
 
 @dataclass(slots=True)
@@ -78,10 +88,14 @@ class ChildMeasures:
     extra_presses: int = 0
     undos: int = 0
     reaction_times: dict[str, list[float]] = field(default_factory=dict)
+    answers_in_question: int = 0
 
     def answer(self, trial: TrialRecord) -> None:
         """Count one answer that counts (not undone)."""
         self.feedback.add(trial)
+        if in_question(trial):
+            self.answers_in_question += 1
+            return
         band = trial.band or SILENT
         self.reaction_times.setdefault(band, []).append(trial.reaction_time)
 
@@ -107,6 +121,7 @@ class ChildMeasures:
             "wrong_feedback_rate": _rate(f.checked - f.right, f.checked),
             "reaction_time_mean": statistics.fmean(times) if times else None,
             "reaction_time_median": statistics.median(times) if times else None,
+            "answers_in_question": self.answers_in_question,
         }
         for band in band_names:
             values = self.reaction_times.get(band, [])

@@ -25,9 +25,9 @@ from kasparctl.learning.learner import LearnerParams
 from kasparctl.learning.session_stats import ProblemBuilder
 from kasparctl.learning.study_stats import ProblemRecord, StudyStats, summarise
 from kasparctl.research.catalogue import SessionData
-from kasparctl.research.children import Children, Feedback
+from kasparctl.research.children import Children, Feedback, in_question
 from kasparctl.research.progress import progress
-from kasparctl.research.walk import walk
+from kasparctl.research.walk import AFTER_WRONG_FEEDBACK, EXPLORATORY, walk
 
 # What a cluster is: the group of children (the paper's unit: groups came back for
 # more sessions), or the session.
@@ -69,8 +69,11 @@ class Condition:
     # By place in the turn order (child 1, 2...), over every session: the plan's own view.
     feedback_by_position: dict[int, Feedback] = field(default_factory=dict)
     undone: int = 0
-    # Seconds from each counted question's end to its answer; prompts while guessing.
+    # Seconds from each counted question's end to its answer, for answers after the
+    # question (research.children.in_question: those in its last words are counted apart);
+    # prompts while guessing.
     reaction_times: list[float] = field(default_factory=list)
+    answers_in_question: int = 0
     prompts: int = 0
 
     @cached_property
@@ -93,13 +96,47 @@ class Condition:
         return list(dict.fromkeys(p.cluster for p in self.problems))
 
 
+def learner_key(session: SessionData) -> tuple[float, ...] | None:
+    """The learner's parameters frozen in the session's plan.json, as a key; None if none."""
+    params = session.learner_params()
+    return None if params is None else tuple(getattr(params, f) for f in _LEARNER_KEYS)
+
+
+_LEARNER_KEYS = ("alpha", "beta", "gamma", "reward_green", "reward_red", "initial_q")
+
+
+def learner_split(sessions: Sequence[SessionData]) -> dict[str, str]:
+    """Session uid -> the learner's mark in its condition's label, for profiles whose
+    sessions were recorded with different parameters under one name (a profile redefined
+    between sessions): those are different learners and are not pooled. "" for the rest."""
+    by_profile: dict[str, set[tuple[float, ...] | None]] = {}
+    for session in sessions:
+        by_profile.setdefault(session.profile, set()).add(learner_key(session))
+    marks: dict[str, str] = {}
+    for session in sessions:
+        key = learner_key(session)
+        if len(by_profile[session.profile]) < 2:
+            marks[session.uid] = ""
+        elif key is None:
+            marks[session.uid] = " [learner not recorded]"
+        else:
+            marks[session.uid] = f" [alpha {key[0]:g}, beta {key[1]:g}]" + (
+                "" if key[2:] == (0.0, 1.0, -1.0, 0.0) else " [other rewards]"
+            )
+    return marks
+
+
 def condition_labels(sessions: Sequence[SessionData]) -> list[str]:
-    """Each session's condition label; with the variant when the sessions mix variants."""
+    """Each session's condition label; with the variant when the sessions mix variants,
+    and with the learner's parameters when one profile name had several."""
     mixed = len({session.variant for session in sessions}) > 1
-    return [
-        f"{session.condition} ({session.variant})" if mixed else session.condition
-        for session in sessions
-    ]
+    marks = learner_split(sessions)
+    labels = []
+    for session in sessions:
+        profile, _, mode = session.condition.partition("/")
+        label = f"{profile}{marks[session.uid]}/{mode}" if marks[session.uid] else session.condition
+        labels.append(f"{label} ({session.variant})" if mixed else label)
+    return labels
 
 
 def cluster_of(session: SessionData, unit: str) -> str:
@@ -122,10 +159,12 @@ def by_condition(
     # A group marked absent was never taught: no session of any condition.
     sessions = [session for session in sessions if session.index.absent is None]
     labelled = list(zip(sessions, condition_labels(sessions), strict=True))
+    marks = learner_split(sessions)
     for index, (session, label) in enumerate(progress(labelled, "reading records", "session")):
+        profile = session.profile + marks[session.uid]
         condition = conditions.setdefault(
             label,
-            Condition(label, Factors(session.profile, session.uncertainty, session.variant)),
+            Condition(label, Factors(profile, session.uncertainty, session.variant)),
         )
         condition.sessions.append(session)
         _collect(session, index, condition, params, children, cluster_of(session, cluster_unit))
@@ -141,7 +180,10 @@ def _collect(
     cluster: str,
 ) -> None:
     toys = session.toys
-    builder = ProblemBuilder(toys, session.answer_key, params(session.profile), group=index)
+    # The learner the session really had (frozen in plan.json); the configuration's
+    # profile only for sessions recorded before it was frozen.
+    learner = session.learner_params() or params(session.profile)
+    builder = ProblemBuilder(toys, session.answer_key, learner, group=index)
     feedback = condition.feedback_by_cluster.setdefault(cluster, Feedback())
     ended_with = None
     for walked in walk(session):
@@ -154,9 +196,17 @@ def _collect(
             if len(record.q_after) != len(toys):
                 continue  # damage the index warned about
             guess = walked.guess
-            builder.add(record, None if guess is None else (guess.perseverative, guess.win_shift))
+            if guess is None:
+                builder.add(record)
+            else:
+                # The flags and their cause as the fold reads them: the CSV's columns.
+                cause = {AFTER_WRONG_FEEDBACK: True, EXPLORATORY: False}.get(guess.cause or "")
+                builder.add(record, (guess.perseverative, guess.win_shift), cause)
             feedback.add(record)
-            condition.reaction_times.append(record.reaction_time)
+            if in_question(record):
+                condition.answers_in_question += 1
+            else:
+                condition.reaction_times.append(record.reaction_time)
             condition.feedback_by_position.setdefault(record.child_index + 1, Feedback()).add(
                 record
             )
@@ -186,6 +236,7 @@ def pooled(conditions: Sequence[Condition], label: str = "all") -> Condition:
         everything.problems.extend(condition.problems)
         everything.undone += condition.undone
         everything.reaction_times.extend(condition.reaction_times)
+        everything.answers_in_question += condition.answers_in_question
         everything.prompts += condition.prompts
         for cluster, counts in condition.feedback_by_cluster.items():
             everything.feedback_by_cluster.setdefault(cluster, Feedback()).merge(counts)

@@ -22,7 +22,7 @@ from kasparctl.config import Config
 from kasparctl.game.phrases import load_phrasebook
 from kasparctl.research.catalogue import SessionData
 from kasparctl.research.children import Children
-from kasparctl.research.conditions import by_condition, by_uncertainty, pooled
+from kasparctl.research.conditions import by_condition, by_uncertainty, learner_split, pooled
 from kasparctl.research.figures import FigureData, draw_all
 from kasparctl.research.inference import (
     attribute_contrasts,
@@ -91,12 +91,26 @@ def write_report(
         by_uncertainty(conditions),
     )
     summary["figures"] = drawn.names
-    summary["notes"] = drawn.notes
+    summary["notes"] = [*_learner_notes(sessions), *drawn.notes]
     write_json(out / "summary.json", summary)
-    write_bytes(out / "summary.md", markdown(summary, drawn.names, drawn.notes).encode("utf-8"))
+    write_bytes(
+        out / "summary.md", markdown(summary, drawn.names, summary["notes"]).encode("utf-8")
+    )
     with atomic_file(out / "children.csv") as stream:
         _write_children(stream, joined(coded_only=False))
     return Written([c.label for c in conditions], list(drawn.names))
+
+
+def _learner_notes(sessions: Sequence[SessionData]) -> list[str]:
+    """A note per profile name whose sessions had different learners (not pooled)."""
+    marks = learner_split(sessions)
+    split = sorted({s.profile for s in sessions if marks.get(s.uid)})
+    return [
+        f"learner profile {profile!r}: its sessions were recorded with different "
+        "parameters (plan.json's learner), so each set is a condition of its own, labelled "
+        "with its alpha and beta"
+        for profile in split
+    ]
 
 
 def _language(config: Config | None) -> tuple[str, str | None]:

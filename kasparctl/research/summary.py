@@ -18,9 +18,11 @@ from typing import Any
 
 import msgspec
 
+from kasparctl.learning.study_stats import summarise
 from kasparctl.research.conditions import Condition
-from kasparctl.research.inference import MEASURES, Contrast, Intervals
+from kasparctl.research.inference import MEASURES, MIN_CLUSTERS, Contrast, Intervals
 from kasparctl.research.output import write_bytes
+from kasparctl.research.sessions_table import session_rows
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,27 @@ def feedback_counts(condition: Condition) -> dict[str, Any]:
     }
 
 
+def with_a_choice(condition: Condition) -> dict[str, Any]:
+    """The first-guess and entropy statistics over the problems with a choice: in the names
+    game a learned name is withdrawn from the later bags, so the last bag is offered one
+    toy, its first guess forced (no choice) and its entropy 0 bits. Left out,
+    the figures compare with the pilot's, where every problem offers every toy."""
+    chosen = [p.record for p in condition.problems if p.record.candidates != 1]
+    stats = summarise(chosen) if chosen else None
+    with_key = sum(1 for p in chosen if p.trials[0].correct is not None)
+    return {
+        "problems_forced": len(condition.problems) - len(chosen),
+        "problems_with_a_choice": len(chosen),
+        "problems_with_a_choice_and_answer_key": with_key,
+        "first_guess_correct_with_a_choice": 0 if stats is None else stats.first_guess_correct,
+        "first_guess_correct_rate_with_a_choice": (
+            None if stats is None or not with_key else stats.first_guess_correct / with_key
+        ),
+        "initial_entropy_with_a_choice": None if stats is None else stats.initial_entropy,
+        "final_entropy_mean_with_a_choice": None if stats is None else stats.final_entropy_mean,
+    }
+
+
 def condition_summary(condition: Condition, found: Intervals) -> dict[str, Any]:
     """One condition's column of the summary: sessions, problems, statistics, intervals."""
     sessions = condition.sessions
@@ -71,6 +94,7 @@ def condition_summary(condition: Condition, found: Intervals) -> dict[str, Any]:
             1 for p in condition.problems if p.record.trials[0].correct is not None
         ),
         **stats,
+        **with_a_choice(condition),
         "entropy_by_trial_low": [e.low for e in found.entropy_by_trial],
         "entropy_by_trial_high": [e.high for e in found.entropy_by_trial],
         **feedback_counts(condition),
@@ -91,7 +115,7 @@ def mode_summary(mode: Condition) -> dict[str, Any]:
     the main outcome measures (kasparctl.research.conditions.by_uncertainty)."""
     stats = mode.stats
     feedback = mode.feedback
-    answers = len(mode.reaction_times)
+    answers = len(mode.reaction_times) + mode.answers_in_question
     with_key = sum(1 for p in mode.problems if p.record.trials[0].correct is not None)
     return {
         "uncertainty": mode.label,
@@ -114,7 +138,11 @@ def mode_summary(mode: Condition) -> dict[str, Any]:
         "wrong_guesses": feedback.wrong_guesses,
         "wrong_red": feedback.wrong_red,
         "right_guesses": feedback.right_guesses,
-        "reaction_time_median": statistics.median(mode.reaction_times) if answers else None,
+        # Over the answers after the question; those in its last words counted apart.
+        "reaction_time_median": (
+            statistics.median(mode.reaction_times) if mode.reaction_times else None
+        ),
+        "answers_in_question": mode.answers_in_question,
         "prompts_per_answer": _ratio(mode.prompts, answers),
     }
 
@@ -134,6 +162,8 @@ def build_summary(
     sessions = everything.sessions
     return {
         "sessions": [s.uid for s in sessions],
+        # One row per session (research.codebook.SESSIONS), as sessions.csv has them.
+        "sessions_table": session_rows(sessions),
         "session_names": [s.name for s in sessions],
         "robots": sorted({s.robot for s in sessions if s.robot}),
         "intervals": {
@@ -223,11 +253,21 @@ def _rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
             "-" if s["trials_min"] is None else f"{s['trials_min']} - {s['trials_max']}",
         ),
         (
-            "First guess correct",
+            "First guess correct, all problems",
             _share(s["first_guess_correct"], s["problems_with_answer_key"])
             + _interval(ci["first_guess_correct_rate"], share=True)
             if s["problems_with_answer_key"]
             else "no answer key",
+        ),
+        (
+            "First guess correct, problems with a choice (forced ones left out)",
+            _share(
+                s["first_guess_correct_with_a_choice"],
+                s["problems_with_a_choice_and_answer_key"],
+            )
+            + f"; {s['problems_forced']} forced"
+            if s["problems_with_a_choice_and_answer_key"]
+            else f"no answer key; {s['problems_forced']} forced",
         ),
         (
             "Perseverative errors",
@@ -241,7 +281,11 @@ def _rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
             + _interval(ci["win_shift_rate"], share=True)
             + attributed(s["win_shifts_after_wrong_feedback"], s["win_shifts_exploratory"]),
         ),
-        ("Entropy before the first guess (bits)", _number(s["initial_entropy"], 3)),
+        ("Entropy before the first guess (bits), all problems", _number(s["initial_entropy"], 3)),
+        (
+            "Entropy before the first guess (bits), problems with a choice",
+            _number(s["initial_entropy_with_a_choice"], 3),
+        ),
         (
             "Final entropy, before the last guess (bits)",
             _mean_sd(s["final_entropy_mean"], s["final_entropy_sd"])
@@ -298,8 +342,8 @@ def _value(measure: str, value: float | None) -> str:
 def _contrast_table(contrasts: Sequence[dict[str, Any]]) -> list[str]:
     lines = [
         "| factor | A - B | measure | A | B | difference [95 % CI] | Hedges' g [95 % CI] "
-        "| clusters |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| p | p (Holm) | design | clusters |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for c in contrasts:
         measure = c["measure"]
@@ -323,9 +367,25 @@ def _contrast_table(contrasts: Sequence[dict[str, Any]]) -> list[str]:
         lines.append(
             f"| {c['factor']} | {c['a']} - {c['b']} | {_MEASURE_LABELS.get(measure, measure)} "
             f"| {_value(measure, c['a_value'])} | {_value(measure, c['b_value'])} "
-            f"| {difference} | {g} | {c['clusters_a']} / {c['clusters_b']} {plural(c['unit'])} |"
+            f"| {difference} | {g} | {_p(c.get('p'))} | {_p(c.get('p_holm'))}"
+            f"{' *' if c.get('significant_holm') else ''} | {_design(c)} "
+            f"| {c['clusters_a']} / {c['clusters_b']} {plural(c['unit'])} |"
         )
     return lines
+
+
+def _p(value: float | None) -> str:
+    return "-" if value is None else ("< 0.001" if value < 0.001 else f"{value:.3f}")
+
+
+def _design(contrast: dict[str, Any]) -> str:
+    """Paired (groups met both sides: how many, in which order) or independent."""
+    if not contrast.get("paired"):
+        return "independent"
+    shared = contrast.get("shared_clusters") or 0
+    first_a, first_b = contrast.get("order_a_first"), contrast.get("order_b_first")
+    order = "" if first_a is None else f"; A first {first_a}, B first {first_b}"
+    return f"paired ({shared} shared{order})"
 
 
 CHILD_COLUMNS = (
@@ -413,6 +473,25 @@ def _modes_table(modes: Sequence[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _forced_caveat(summary: dict[str, Any]) -> list[str]:
+    """Why the names game's first-guess and entropy figures are not the paper's pilot's."""
+    if not summary["all"].get("problems_forced"):
+        return []
+    return [
+        "**Forced choices.** In the names game a learned name is no longer offered for the "
+        "other bags, so the last bag has one candidate: its first guess is no choice (right "
+        "by elimination, unless a name learned wrongly withdrew the right toy) and its "
+        f"entropy 0 bits ({summary['all']['problems_forced']} such "
+        "problems here). The figures over all problems are therefore not comparable with the "
+        "paper's pilot, where every toy was offered for every location (2.585 bits before "
+        "each first guess with six toys); the rows *problems with a choice* leave the forced "
+        "problems out and are the comparable ones. Even with a choice the later bags offer "
+        "fewer toys, so their \"no idea\" is log2 of fewer (entropy_by_trial draws a line for "
+        "each number of toys offered).",
+        "",
+    ]
+
+
 def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[str]) -> str:
     """The report's summary.md: the conditions side by side, contrasts, children, figures."""
     columns = list(summary["conditions"])
@@ -431,8 +510,10 @@ def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[st
         f"{summary['all']['problems']} problems. Trials to learn and final entropies are over "
         "learned problems; undone answers are not trials. In brackets: 95 % intervals, "
         f"cluster bootstrap over {plural(method['unit'])} ({method['replicates']} resamples, seed "
-        f"{method['seed']}); none with fewer than two. Definitions: docs/research-data.md.",
+        f"{method['seed']}); none with fewer than {MIN_CLUSTERS} a side. Definitions: "
+        "docs/research-data.md.",
         "",
+        *_forced_caveat(summary),
         *("| " + " | ".join(row) + " |" for row in table),
         "",
     ]
@@ -453,7 +534,12 @@ def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[st
         lines += [
             "## Contrasts",
             "",
-            "A - B, each side's clusters resampled; Hedges' g over the clusters' own values.",
+            "A - B with 95 % cluster-bootstrap intervals: paired (one set of weights for "
+            "both sides) where groups met both conditions, else each side's clusters "
+            "resampled on their own; Hedges' g over the clusters' own values, with the "
+            "difference's sign. p: two-sided bootstrap; p (Holm): corrected over every "
+            "contrast of this report (one family), * where below 0.05. Read p (Holm), not "
+            "whether an interval excludes 0.",
             "",
         ]
         lines += [*_contrast_table(summary["contrasts"]), ""]

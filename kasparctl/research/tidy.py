@@ -1,11 +1,14 @@
 """Sessions as tidy tables: one CSV row per trial, and one per other event.
 
-Plain CSV from the csv module, readable by R's read.csv and pandas' read_csv
-as it is: a header of snake_case names, booleans TRUE/FALSE (both read them
-as logical), an empty cell where a value is missing, numbers in full
+Plain CSV from the csv module, readable by R's read.csv, readr and pandas'
+read_csv alike as it is: a header of snake_case names, booleans TRUE/FALSE
+(all read them as logical), NA where a value is missing (R's read.csv reads an
+empty text cell as "", not NA; NA is missing to all three), numbers in full
 precision, times in UTC ISO 8601. A text cell a spreadsheet would evaluate
-(starting with =, +, -, @, a tab or a carriage return) starts with a "'".
-docs/research-data.md documents every column; tests hold the two together.
+(starting with =, +, -, @, a tab or a carriage return), or one that a reader
+would take for a missing value ("NA", "null", "None"...), starts with a "'".
+The columns are kasparctl.research.codebook's, which docs/research-data.md
+shows.
 
 Rows are streamed session by session, record by record: an export holds one
 row at a time, whatever the size of the sessions.
@@ -15,18 +18,22 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import re
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any, TextIO
 
 from kasparctl.game.jsonl import record_to_plain
 from kasparctl.game.records import TrialRecord
+from kasparctl.research import codebook
 from kasparctl.research.anonymise import NO_PSEUDONYMS, Pseudonyms
 from kasparctl.research.catalogue import SessionData
+from kasparctl.research.children import in_question
 from kasparctl.research.output import text_output
 from kasparctl.research.participants import NO_PARTICIPANTS, Participants
 from kasparctl.research.progress import progress
 from kasparctl.research.walk import walk
+from kasparctl.vocabulary import MISSING_MARKERS
 
 # Fields of a record that are bookkeeping, not the event: in their own columns or nowhere.
 # learner_rng is the learner's generator state, internal to resuming.
@@ -42,23 +49,32 @@ def snake(name: str) -> str:
 
 # What a spreadsheet reads as the start of a formula (OWASP's list): such text gets a "'".
 FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+# A missing value, as base R's read.csv, readr and pandas all read it.
+MISSING = "NA"
 
 
 def cell(value: Any) -> str:
-    """A value as a CSV cell: empty for None, TRUE/FALSE, numbers in full, lists joined by ";".
+    """A value as a CSV cell: NA for None (and for empty text: R would read "" as text,
+    pandas as missing), TRUE/FALSE, numbers in full, lists joined by ";".
 
-    Text that a spreadsheet would evaluate as a formula is escaped with a leading "'".
+    Text that a spreadsheet would evaluate as a formula, or that a reader would take for
+    a missing value (kasparctl.vocabulary.MISSING_MARKERS: a group code "NA" recorded
+    before the configuration refused it), is escaped with a leading "'".
     """
     if value is None:
-        return ""
+        return MISSING
     if isinstance(value, bool):
         return "TRUE" if value else "FALSE"
     if isinstance(value, float):
-        return repr(value)
+        return repr(value) if math.isfinite(value) else MISSING
     if isinstance(value, int):
         return str(value)
     text = ";".join(str(item) for item in value) if isinstance(value, list | tuple) else str(value)
-    return "'" + text if text.startswith(FORMULA_STARTS) else text
+    if not text:
+        return MISSING
+    if text.startswith(FORMULA_STARTS) or text.strip() in MISSING_MARKERS:
+        return "'" + text
+    return text
 
 
 def toy_columns(sessions: Sequence[SessionData]) -> dict[str, str]:
@@ -79,61 +95,24 @@ def toy_columns(sessions: Sequence[SessionData]) -> dict[str, str]:
 
 
 def trial_header(toys: dict[str, str], participants: Participants = NO_PARTICIPANTS) -> list[str]:
-    """The trials CSV's columns, a column per toy for the per-toy values and per attribute."""
-
-    def per_toy(prefix: str) -> list[str]:
-        return [prefix + suffix for suffix in toys.values()]
-
+    """The trials CSV's columns (the codebook's), a column per toy for the per-toy values
+    and per attribute."""
     return [
-        "session",
-        "session_name",
-        "robot",
-        "group",
-        "condition",
-        "profile",
-        "speak_uncertainty",
-        "uncertainty",
-        "variant",
-        "script",
-        "script_version",
-        "language",
-        "trial",
-        "problem_trial",
-        "target",
-        "answer",
-        "child",
-        "child_number",
-        "participant",
-        *(f"participant_{column}" for column in participants.columns),
-        "seat",
-        "device",
-        "credited_child_number",
-        "credited_participant",
-        "candidates",
-        "n_candidates",
-        *per_toy("p_"),
-        "entropy",
-        "band",
-        "spoken",
-        "choice",
-        "feedback",
-        "reaction_time",
-        "reward",
-        *per_toy("q_before_"),
-        *per_toy("q_after_"),
-        "perseverative",
-        "win_shift",
-        "error_cause",
-        "correct",
-        "feedback_right",
-        "learned",
-        "undone",
-        "right_toy_offered",
-        "confused",
-        "reopened",
-        "time",
-        "clock_synchronised",
+        name
+        for name, _ in codebook.expanded(
+            codebook.TRIALS, tuple(toys.values()), tuple(participants.columns)
+        )
     ]
+
+
+def learner_columns(session: SessionData) -> dict[str, Any]:
+    """The learner frozen in the session's plan.json, as the learner_* columns."""
+    frozen = session.learner or {}
+    return {
+        f"learner_{name}": value if isinstance(value, int | float) else None
+        for name, _ in codebook.LEARNER_FIELDS
+        for value in (frozen.get(name),)
+    }
 
 
 def trial_rows(
@@ -146,6 +125,7 @@ def trial_rows(
     names = Pseudonyms(session.first_names()) if anonymise else NO_PSEUDONYMS
     answer_key = session.answer_key
     identity = session.identity
+    learners = learner_columns(session)
     for walked in walk(session):
         trial, guess = walked.record, walked.guess
         if not isinstance(trial, TrialRecord) or guess is None:
@@ -156,7 +136,9 @@ def trial_rows(
             **identity,
             "script": session.script[0],
             "script_version": session.script[1],
+            **learners,
             "trial": trial.trial,
+            "seq": trial.seq,
             "problem_trial": trial.problem_trial,
             "target": trial.target,
             "answer": answer_key[target_index] if 0 <= target_index < len(answer_key) else None,
@@ -181,6 +163,9 @@ def trial_rows(
             "choice": trial.choice,
             "feedback": trial.feedback,
             "reaction_time": trial.reaction_time,
+            # Answered in the question's last words; negative times recorded before the
+            # flag existed are such answers too.
+            "in_question": in_question(trial),
             "reward": trial.reward,
             # As the records read (kasparctl.game.fold), like the report's counts.
             "perseverative": guess.perseverative,
@@ -198,6 +183,7 @@ def trial_rows(
             "confused": guess.confused,
             "reopened": guess.reopened,
             "time": trial.time,
+            "session_clock": walked.session_clock,
             # Whether `time` can be trusted: the robot's wall clock synchronised all session.
             "clock_synchronised": session.index.clock_synchronised,
         }
@@ -212,25 +198,7 @@ def _per_toy(trial: TrialRecord) -> tuple[tuple[str, list[float]], ...]:
     return (("p_", trial.probabilities), ("q_before_", trial.q_before), ("q_after_", trial.q_after))
 
 
-EVENT_HEADER = [
-    "session",
-    "session_name",
-    "robot",
-    "group",
-    "condition",
-    "uncertainty",
-    "script",
-    "script_version",
-    "language",
-    "seq",
-    "time",
-    "clock",
-    "kind",
-    "name",
-    "trial",
-    "participant",
-    "detail",
-]
+EVENT_HEADER = [column.name for column in codebook.EVENTS]
 
 # The field that names what happened, per record kind ("command": which command).
 _EVENT_NAME = {
@@ -273,7 +241,9 @@ def event_rows(session: SessionData, anonymise: bool = False) -> Iterator[dict[s
             "session": session.uid,
             "session_name": session.name,
             "robot": session.robot,
+            "robot_name": session.robot_name,
             "group": session.group,
+            "session_number": session.number,
             "condition": session.condition,
             "uncertainty": session.uncertainty,
             "script": session.script[0],
@@ -282,11 +252,17 @@ def event_rows(session: SessionData, anonymise: bool = False) -> Iterator[dict[s
             "seq": record.get("seq"),
             "time": record.get("time"),
             "clock": record.get("clock"),
+            "session_clock": walked.session_clock,
             "kind": kind,
             "name": names.value(name),
-            "trial": record.get("trial"),
+            # A prompt's trial: the question it repeated (the walk knows which).
+            "trial": record.get("trial", walked.trial),
             "participant": None if child is None else session.participant(child),
-            "detail": json.dumps(names.value(detail), sort_keys=True) if detail else None,
+            "detail": (
+                json.dumps(names.value(detail), sort_keys=True, ensure_ascii=False)
+                if detail
+                else None
+            ),
         }
 
 

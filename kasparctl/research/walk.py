@@ -16,11 +16,20 @@ Streamed, so a session of any size is read in constant memory. What is added:
   answer in rotation: the child of the next question is the rotation's turn
   modulo the group size, as the game counts it (an answer moves it on, an undo
   back, a `rotation` record sets it: a child away passed over); for a press of
-  a seat's own keyfob, the seat's child, and for a rotation record, its child.
+  a seat's own keyfob, the seat's child, and for a rotation record, its child;
+  for a prompt while guessing, also the trial of the question it repeated (the
+  trial number that question's answer has or would have had);
+- for every record, `session_clock`: seconds since the session's first record on
+  a clock that runs on across resumes. The records' `clock` is the robot's
+  monotonic clock, which starts again when the robot (or the demo) restarts; at
+  a resume (or wherever `clock` goes back) the session clock carries on from the
+  last record before it plus the wall-clock gap between the two records (none
+  when the wall clock went back or cannot be read).
 """
 
 from __future__ import annotations
 
+import datetime as dt
 from collections import OrderedDict
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -30,7 +39,11 @@ from kasparctl.game.records import (
     AnyRecord,
     PressRecord,
     PromptRecord,
+    QuestionRecord,
+    Record,
     RotationRecord,
+    SessionEvent,
+    SessionRecord,
     StepRecord,
     TrialRecord,
     UndoRecord,
@@ -54,6 +67,10 @@ class Walked:
     # What the records read once this one is applied: after the last record, what the
     # session ended with (a name re-opened and never asked again is not learned).
     facts: Facts = field(kw_only=True)  # required: no record may leave it out
+    # Seconds since the session's first record, continuous across resumes.
+    session_clock: float = field(default=0.0, kw_only=True)
+    # For a prompt while guessing: the trial of the question it repeated.
+    trial: int | None = field(default=None, kw_only=True)
 
     @property
     def cause(self) -> str | None:
@@ -64,6 +81,37 @@ class Walked:
 
 # The phrase keys of the check of the buttons at a session's start (kasparctl.game.buttons).
 CHECK_LINES = "buttons."
+
+
+class SessionClock:
+    """The records' clock made continuous across the restarts of the robot."""
+
+    def __init__(self) -> None:
+        """A clock that has seen no record."""
+        self.offset: float | None = None
+        self.last: tuple[float, str] = (0.0, "")  # the last record's session clock, time
+
+    def read(self, record: Record) -> float:
+        """The session clock of `record` (records in order)."""
+        clock = record.clock
+        last_clock, last_time = self.last
+        resumed = isinstance(record, SessionRecord) and record.event is SessionEvent.RESUMED
+        if self.offset is None:
+            self.offset = -clock
+        elif resumed or clock + self.offset < last_clock:
+            self.offset = last_clock + _gap(last_time, record.time) - clock
+        now = clock + self.offset
+        self.last = (now, record.time)
+        return now
+
+
+def _gap(before: str, after: str) -> float:
+    """Seconds of wall clock from `before` to `after` (ISO 8601); 0 if unknown or back."""
+    try:
+        seconds = dt.datetime.fromisoformat(after) - dt.datetime.fromisoformat(before)
+    except (ValueError, TypeError):
+        return 0.0
+    return max(0.0, seconds.total_seconds())
 
 
 def walk(session: SessionData) -> Iterator[Walked]:
@@ -77,33 +125,59 @@ def walk(session: SessionData) -> Iterator[Walked]:
     # The research is not told the session's limit of guesses: a give-up is read when
     # the game moves on, which is before any later trial.
     reading = Reading()
+    clock = SessionClock()
+    asked: int | None = None  # the trial of the question waiting for its answer
     for record in session.records():
         guess = reading.apply(record)
+        now = clock.read(record)
         if isinstance(record, TrialRecord):
             recent[record.trial] = (record.child_index, turn)
             if len(recent) > _RECENT_TRIALS:
                 recent.popitem(last=False)
             turn += 1
+            asked = None
             undone_now = record.trial in undone
-            yield Walked(record, record.child_index, undone_now, guess, facts=reading.facts)
+            yield Walked(
+                record,
+                record.child_index,
+                undone_now,
+                guess,
+                facts=reading.facts,
+                session_clock=now,
+            )
         elif isinstance(record, UndoRecord):
             child, turn = recent.get(record.trial, (None, turn - 1))
-            yield Walked(record, child, facts=reading.facts)
+            yield Walked(record, child, facts=reading.facts, session_clock=now)
         elif isinstance(record, RotationRecord):
             turn = record.turn  # a child out of the rotation passed over, taken out, back
-            yield Walked(record, record.child_index, facts=reading.facts)
+            yield Walked(record, record.child_index, facts=reading.facts, session_clock=now)
         elif isinstance(record, PressRecord):
             if isinstance(record.pressed_by_index, int):  # a seat's own keyfob
-                yield Walked(record, record.pressed_by_index, facts=reading.facts)
+                yield Walked(
+                    record, record.pressed_by_index, facts=reading.facts, session_clock=now
+                )
                 continue
             extra = record.extra is True and isinstance(record.trial, int)
             answered = recent.get(record.trial) if extra else None  # type: ignore[arg-type]
-            yield Walked(record, None if answered is None else answered[0], facts=reading.facts)
+            yield Walked(
+                record,
+                None if answered is None else answered[0],
+                facts=reading.facts,
+                session_clock=now,
+            )
         elif isinstance(record, PromptRecord):
             # A prompt of the check of the buttons is to the whole group, no child's turn.
             turn_taking = step == "guessing" and not record.line.startswith(CHECK_LINES)
-            yield Walked(record, turn % size if turn_taking else None, facts=reading.facts)
+            yield Walked(
+                record,
+                turn % size if turn_taking else None,
+                facts=reading.facts,
+                session_clock=now,
+                trial=asked if turn_taking else None,
+            )
         else:
             if isinstance(record, StepRecord):
                 step = record.to
-            yield Walked(record, facts=reading.facts)
+            elif isinstance(record, QuestionRecord):
+                asked = record.trial
+            yield Walked(record, facts=reading.facts, session_clock=now)
