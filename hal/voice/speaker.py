@@ -25,7 +25,7 @@ from pathlib import Path
 import structlog
 
 from hal.clock import Clock, MonotonicClock
-from hal.errors import VoiceError
+from hal.errors import SettingsError, VoiceError
 from hal.voice.api import Spoken, SpokenStatus
 from hal.voice.envelope import EnvelopeListener
 from hal.voice.espeak import espeak_argv
@@ -87,6 +87,29 @@ class Voice:
     def engine(self) -> str:
         """The configured engine, tried first ("espeak-ng" or "pyttsx3")."""
         return self._settings.engine
+
+    @property
+    def settings(self) -> VoiceSettings:
+        """The settings the next line is spoken with."""
+        return self._settings
+
+    def configure(self, settings: VoiceSettings) -> None:
+        """Speak with `settings` from the next line on: a session's own voice, a reload's.
+
+        The engine, voice, rate, volume, pitch, timeout and clips change; where the sound
+        goes (player, wav_dir) does not (the mouth listens to that sink): SettingsError
+        when they differ. A pyttsx3 engine built with the old settings is replaced.
+        """
+        old = self._settings
+        if settings == old:
+            return
+        if (settings.player, settings.wav_dir) != (old.player, old.wav_dir):
+            raise SettingsError("player, wav_dir: take effect when the voice is built again")
+        self._settings = settings
+        self._espeak = espeak_argv(settings)
+        engine = self._pyttsx3
+        if engine is not None:
+            self._retire(engine, "the voice's settings changed")
 
     def listen(self, listener: EnvelopeListener | None) -> bool:
         """Tell `listener` the levels of every line as its audio reaches the player (the
