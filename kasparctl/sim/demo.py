@@ -365,8 +365,21 @@ def assemble(
     clock = LoopClock()
     out = options.out
 
+    early: list[str] = []
+
     def narrate(text: str) -> None:
-        out.write(f"[{clock.now():10.3f}]   ({text})\n")
+        try:
+            now = clock.now()
+        except RuntimeError:  # built before its loop runs: told when the game begins
+            early.append(text)
+            return
+        while early:
+            out.write(f"[{now:10.3f}]   ({early.pop(0)})\n")
+        out.write(f"[{now:10.3f}]   ({text})\n")
+
+    def tell_early(event: GameEvent, info: dict[str, Any]) -> None:
+        if early:
+            narrate(early.pop())
 
     researcher = None
     if config.researcher.source == "device":
@@ -451,6 +464,7 @@ def assemble(
             patience=patience,
         )
         game.listeners.append(children)
+    game.listeners.insert(0, tell_early)
     game.listeners.append(_narrator(narrate))
     transcript = out if isinstance(out, Transcript) else None
     motion = MotionRecord(servos, options.motion) if options.motion is not None else None
