@@ -139,3 +139,16 @@ def test_a_reload_names_each_setting_that_waits_for_a_restart(tmp_path: Path) ->
     assert applied.state_dir == running.state_dir and applied.logging == running.logging
     assert applied.voice.rate == 90 and applied.game.correct_answers_to_learn == 3
     assert applied.robot_settings.name == "Robin"
+
+
+def test_configure_changes_how_kaspar_sounds_never_where_the_sound_goes(tmp_path: Path) -> None:
+    from hal.voice.settings import VoiceSettings
+
+    voice = Voice(VoiceSettings(wav_dir=str(tmp_path)))
+    voice.configure(VoiceSettings(rate=90, volume=0.2, pitch=30, voice="de", player=("paplay",)))
+    settings = voice.settings
+    assert (settings.rate, settings.volume, settings.pitch, settings.voice) == (90, 0.2, 30, "de")
+    assert settings.wav_dir == str(tmp_path) and settings.player == VoiceSettings().player
+    fixed = Voice(VoiceSettings(engine="pyttsx3", wav_dir=str(tmp_path)), keep=("wav_dir", "engine"))
+    fixed.configure(VoiceSettings(engine="espeak-ng", rate=100))
+    assert (fixed.settings.engine, fixed.settings.rate) == ("pyttsx3", 100)

@@ -84,7 +84,7 @@ class VoiceOutput(Protocol):
 
     def configure(self, settings: VoiceSettings) -> None:
         """Speak with `settings` from the next line on (a session's own voice, a reload);
-        SettingsError for what cannot change without building the voice again."""
+        where the sound goes stays as the voice was built."""
         ...
 
     def listen(self, listener: EnvelopeListener | None) -> bool:
