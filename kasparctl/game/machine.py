@@ -283,9 +283,6 @@ class Game:
         self.script = script(config.game.script)
         self._use_script(self.script)  # the configured script's words, until a session opens
         self.recorder.to(None)
-        # Until a session opens, the robot-wide voice and speed (an earlier session's end).
-        self.hw.voice.configure(config.voice)
-        self.hw.servos.scale_speeds(config.game.speed_scale)
         initial = "idle"
         if start.resumed is not None:
             self._take_session(start.resumed)

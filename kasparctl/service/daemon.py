@@ -317,6 +317,7 @@ class Daemon:
         faults, self._pending_faults = self._pending_faults, []
         game = self._new_game(resumed, stopped, faults)
         await self._play(game)
+        self._robot_wide()
         # What the disk still refuses is written by the next game (or before the next read).
         self.lasting.recorder.flush()
         self.lasting.problems.game_ended()
@@ -326,6 +327,17 @@ class Daemon:
             game.stopped_waiting.session.close()  # neither reopened nor closed in this game
         if self._reload:
             self._apply_reload()
+
+    def _robot_wide(self) -> None:
+        """The voice and the joints' speed as the robot has them, a session's own ended
+        (the next game's session takes its own)."""
+        if self.hw is None:
+            return
+        try:
+            self.hw.voice.configure(self.config.voice)
+            self.hw.servos.scale_speeds(self.config.game.speed_scale)
+        except Exception as error:  # never the end of the robot: logged, the next game goes on
+            log.error("the robot-wide voice or speed could not be restored", error=str(error))
 
     def _read_sessions(self) -> tuple[OpenedSession | None, OpenedSession | None]:
         """The session to resume, or else the stopped one waiting for the researcher.
