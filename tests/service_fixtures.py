@@ -192,7 +192,10 @@ def without_battery(status: str) -> str:
 
 def spoken(line: str, phrases: list[str]) -> bool:
     """Whether a line of the simulated voice's output is Kaspar saying one of `phrases`."""
-    return any(line.endswith(f"Kaspar: {phrase}") for phrase in phrases)
+    # The greeting says the robot's name ([robot] name): the demo robot's is Kaspar.
+    return any(
+        line.endswith(f"Kaspar: {phrase.replace('{robot}', 'Kaspar')}") for phrase in phrases
+    )
 
 
 def log_event(line: str, event: str) -> dict[str, Any] | None:

@@ -189,18 +189,37 @@ def test_a_damaged_unfinished_session_is_abandoned_and_the_next_one_starts(
     assert kept.keys() <= {p.name for p in directory.iterdir()}
 
 
-def test_a_session_of_a_game_that_changed_is_abandoned(
+def five_toys(text: str) -> str:
+    fewer = '"lion", "elephant", "giraffe", "monkey", "zebra"]'
+    return text.replace('"lion", "elephant", "giraffe", "monkey", "zebra", "crocodile"]', fewer)
+
+
+def test_a_session_recorded_before_settings_of_a_game_that_changed_is_abandoned(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     directory = interrupted(tmp_path, monkeypatch)
-    fewer = '"lion", "elephant", "giraffe", "monkey", "zebra"]'
-
-    def five_toys(text: str) -> str:
-        text = text.replace('"lion", "elephant", "giraffe", "monkey", "zebra", "crocodile"]', fewer)
-        return text
-
+    plan = json.loads((directory / PLAN_FILE).read_bytes())
+    del plan["settings"]  # as plan.json was before it kept the session's settings
+    (directory / PLAN_FILE).write_text(json.dumps(plan), encoding="utf-8")
     rig = restarted_after_damage(tmp_path, monkeypatch, edit=five_toys)
     assert_abandoned(rig, directory, "the game has changed since the session began")
+
+
+def test_a_session_of_a_game_that_changed_since_resumes_with_its_own_settings(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """plan.json keeps the session's settings: it plays on with its six toys."""
+    directory = interrupted(tmp_path, monkeypatch)
+
+    async def scenario(rig: FaultRig) -> None:
+        await rig.event(GameEvent.RESUMED, since=0)
+        await rig.event(GameEvent.ANSWERED, lambda info: info["trial"] >= 3, since=0)
+
+    run_daemon(tmp_path, monkeypatch, scenario, variant="pilot", edit=five_toys)
+    trials = [r for r in lines(directory / RECORDS_FILE) if r["kind"] == "trial"]
+    assert [r["trial"] for r in trials][:3] == [1, 2, 3]
+    assert {len(r["probabilities"]) for r in trials} == {6}
+    assert not any(r.get("event") == "abandoned" for r in lines(directory / RECORDS_FILE))
 
 
 def test_a_snapshot_that_is_not_json_is_rebuilt_from_the_records(

@@ -10,7 +10,7 @@ from fault_rig import Breakage
 
 from hal.keyfob.gestures import ANSWERS_ONLY, Gesture, GestureKind
 from hal.keyfob.settings import ResearcherSettings
-from kasparctl.config import SessionPlan
+from kasparctl.config import SessionPlan, resolve_session
 from kasparctl.game.faults import HardwareFault, Problems, step_fault
 from kasparctl.game.jsonl import read_records
 from kasparctl.game.opening import open_new, planned
@@ -158,7 +158,12 @@ def test_the_one_way_to_open_a_session_writes_its_plan_and_its_first_state(
     opened = open_new(tmp_path, CONFIG, plan, seed=7)
     expected = planned(CONFIG, plan, 7)
     assert {key: opened.session.plan[key] for key in expected} == expected
-    assert opened.plan is plan and opened.state.trials == 0 and opened.state.step == "idle"
+    # The plan it plays is the planned one with its uncertainty, script and life written out.
+    assert opened.plan == resolve_session(CONFIG, plan).plan and opened.plan.group == "g"
+    assert (opened.plan.uncertainty, opened.plan.script, opened.plan.alive) == (
+        "spoken", "paper", True,
+    )  # fmt: skip
+    assert opened.state.trials == 0 and opened.state.step == "idle"
 
 
 # -- whose a gesture is ---------------------------------------------------------------------

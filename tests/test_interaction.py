@@ -29,8 +29,9 @@ MESSY = Messiness(p_hold=0.4, p_double=0.3, p_both=0.3, p_early=0.5)
 
 
 def first(key: str) -> str:
-    """The fixed (paper) script's wording of a key without placeholders."""
-    return BOOK.variants(key)[0]
+    """The fixed (paper) script's wording of a key without placeholders (but the robot's
+    name, the demo robot's: Kaspar)."""
+    return BOOK.variants(key)[0].replace("{robot}", "Kaspar")
 
 
 def said(out: str) -> list[str]:

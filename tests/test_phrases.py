@@ -41,6 +41,7 @@ SAMPLE_VALUES = {
     "mover": "Sam",
     "presser": "Ali",
     "number": "2",
+    "robot": "Robin",
 }
 SHIPPED = sorted(
     path.stem for path in (Path(__file__).resolve().parents[1] / "phrases").glob("*.toml")
@@ -52,7 +53,7 @@ LONGEST = {
     "en": {
         "bag": "6", "bags": "6", "toy": "crocodile", "location": "bookshelf",
         "where": "on the top shelf", "child": "Anna Maria", "mover": "Anna Maria",
-        "presser": "Anna Maria", "number": "6",
+        "presser": "Anna Maria", "number": "6", "robot": "Kaspar",
     },
 }  # fmt: skip
 # Lines of step 4, said again and again: at most two sentences (the brief's limit).

@@ -29,7 +29,10 @@ def test_the_robot_is_given_or_derived(tmp_path: Path) -> None:
     given = Session.create(tmp_path / "a", {"group": "G1"}, robot="kaspar-3")
     derived = Session.create(tmp_path / "b", {"group": "G1"})
     for session, robot in ((given, "kaspar-3"), (derived, default_robot_id())):
-        assert json.loads((session.directory / PLAN_FILE).read_text())["robot"] == robot
+        assert json.loads((session.directory / PLAN_FILE).read_text())["robot"] == {
+            "id": robot,
+            "name": "Kaspar",
+        }
         session.close()
 
 

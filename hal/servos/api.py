@@ -165,6 +165,11 @@ class ServoApi(Protocol):
         """Group name (left_arm, head, ...) -> its joints."""
         ...
 
+    def scale_speeds(self, scale: float) -> None:
+        """Every joint's speed limit times `scale` (0 < scale <= 1) from the next goal on:
+        a session's slower robot. UnsafeCommand for a scale outside that."""
+        ...
+
     @property
     def faults(self) -> tuple[Fault, ...]:
         """The latched faults, oldest first; empty when all is well."""

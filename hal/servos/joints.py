@@ -162,9 +162,26 @@ class Joints:
         self._bits: dict[tuple[str, str], int] = {}  # (joint, error bit) -> polls seen in a row
         self._battery_v: float | None = None  # the battery joint's last voltage reading
         self.step = 1.0 / settings.control_hz
+        # Every joint's speed limit times this (a session's slower robot); never above 1.
+        self._speed_scale = 1.0
         # Each coupled joint's own value, as last asked (ServoSettings.realise adds its
         # leader's share): a lid keeps it while its eye moves.
         self._own: dict[str, float] = {}
+
+    @property
+    def speed_scale(self) -> float:
+        """What every joint's speed limit is multiplied by now (1: the configured limits)."""
+        return self._speed_scale
+
+    def scale_speeds(self, scale: float) -> None:
+        """Every joint's speed limit times `scale` (0 < scale <= 1) from the next goal on:
+        moves and streams go slower, never faster than the configured limits."""
+        if not 0.0 < scale <= 1.0:
+            raise UnsafeCommand(f"speed scale: expected more than 0 and at most 1, found {scale}")
+        self._speed_scale = scale
+
+    def _limit(self, joint: _Joint) -> float:
+        return joint.settings.max_speed_dps * self._speed_scale
 
     @classmethod
     def from_settings(cls, settings: ServoSettings, clock: Clock) -> Joints:
@@ -347,13 +364,13 @@ class Joints:
                     continue
                 target = self._clamped(joint, pose[joint.name])
                 elapsed = period if joint.sent_at is None else max(0.0, now - joint.sent_at)
-                reach = joint.settings.max_speed_dps * min(period, elapsed)
+                reach = self._limit(joint) * min(period, elapsed)
                 goal = max(start - reach, min(start + reach, target))
                 if goal == start and joint.sent_at is not None:
                     continue  # nothing to change: no packet for a joint at rest
                 joint.commanded = goal
                 joint.sent_at = now
-                goals[joint.servo_id] = (joint.to_raw(goal), joint.settings.max_speed_dps)
+                goals[joint.servo_id] = (joint.to_raw(goal), self._limit(joint))
                 sent[joint.name] = goal
             if goals:
                 await self._guarded(members[0], driver.write_goals(goals, period))
@@ -753,7 +770,7 @@ class Joints:
             if joint.commanded is None:  # never guess a start: a guess can be a jump
                 raise UnsafeCommand(f"{joint.name}: no known position to start from")
             starts[joint.name] = joint.commanded
-        limits = {j.name: min(j.settings.max_speed_dps, speed or math.inf) for j in joints}
+        limits = {j.name: min(self._limit(j), speed or math.inf) for j in joints}
         # Long enough that the profile's steepest step keeps every joint within its limit.
         needed = max(
             (PROFILE_PEAK * abs(targets[n] - starts[n]) / limits[n] for n in targets), default=0.0

@@ -13,7 +13,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:
+    from hal.voice.settings import VoiceSettings
 
 
 class SpokenStatus(StrEnum):
@@ -77,6 +80,11 @@ class VoiceOutput(Protocol):
 
     async def close(self) -> None:
         """Cancel, then release the engine; idempotent."""
+        ...
+
+    def configure(self, settings: VoiceSettings) -> None:
+        """Speak with `settings` from the next line on (a session's own voice, a reload);
+        where the sound goes stays as the voice was built."""
         ...
 
     def listen(self, listener: EnvelopeListener | None) -> bool:

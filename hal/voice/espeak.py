@@ -23,7 +23,8 @@ STREAM_CHUNK = 4096
 def espeak_argv(settings: VoiceSettings) -> list[str]:
     """espeak-ng's command line reading text on stdin, without an output option.
 
-    Volume 0.0 to 1.0 becomes espeak's amplitude 0 to 100; rate is words per minute.
+    Volume 0.0 to 1.0 becomes espeak's amplitude 0 to 100; rate is words per minute;
+    pitch is espeak's own 0 to 99.
     """
     return [
         settings.espeak_ng,
@@ -33,6 +34,8 @@ def espeak_argv(settings: VoiceSettings) -> list[str]:
         str(settings.rate),
         "-a",
         str(round(settings.volume * 100)),
+        "-p",
+        str(settings.pitch),
         "--stdin",
     ]
 

@@ -56,6 +56,8 @@ class VoiceSettings(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_
     rate: Annotated[int, msgspec.Meta(ge=80, le=450, extra={"unit": "words per minute"})] = 150
     # 1.0 is espeak's normal amplitude.
     volume: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 1.0
+    # espeak-ng's pitch, 0 to 99 (50 its own); the pyttsx3 engine has no pitch to set.
+    pitch: Annotated[int, msgspec.Meta(ge=0, le=99)] = 50
     # An utterance not finished after this long is cut and the engine recovered.
     timeout: Annotated[float, msgspec.Meta(ge=1.0, le=300.0, extra={"unit": "s"})] = 20.0
     # Phrase key -> recorded WAV that is played instead of the text.

@@ -26,6 +26,7 @@ from typing import TextIO
 from hal.clock import Clock, thread_work
 from hal.voice.api import EnvelopeListener, Spoken, SpokenStatus, VoiceOutput
 from hal.voice.envelope import FRAME_S, syllable_envelope
+from hal.voice.settings import VoiceSettings
 
 PAUSE_AFTER_LINE = 0.3
 
@@ -91,6 +92,15 @@ class SimVoice:
     def player(self) -> str | None:
         """The real voice's player, if it plays through one; None otherwise (no latency)."""
         return self._also.player if self._also is not None else None
+
+    def configure(self, settings: VoiceSettings) -> None:
+        """Time each line at `settings`' rate from the next line on, with its clips and
+        timeout (and the real voice it also speaks with, if any, takes them all)."""
+        self._rate = settings.rate
+        self._clips = dict(settings.clips)
+        self._timeout = settings.timeout
+        if self._also is not None:
+            self._also.configure(settings)
 
     def inject_fault(self, error: str | None, *, hang: bool = False) -> None:
         """From now on every line fails with `error` (the line being said ends at once);

@@ -22,6 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import msgspec
 import structlog
 
 from hal.clock import Clock, MonotonicClock
@@ -52,6 +53,10 @@ class _Request:
     via: str | None = None
 
 
+# What configure() keeps by default: where the sound goes, chosen when the voice is built.
+WHERE_SOUND_GOES = ("backend", "player", "wav_dir", "espeak_ng")
+
+
 class Voice:
     """The real voice; satisfies hal.voice.api.VoiceOutput."""
 
@@ -62,14 +67,16 @@ class Voice:
         *,
         sink: Sink | None = None,
         engine_factory: Callable[[], Pyttsx3Engine] = default_engine_factory,
+        keep: tuple[str, ...] = WHERE_SOUND_GOES,
     ) -> None:
         """The voice of `settings`; `clock` stamps each Spoken and times out utterances.
 
         `sink` replaces the one the settings name (a WAV file, a bench's probe);
         `engine_factory` builds each pyttsx3 engine, on its own thread. No worker
         or engine starts until the first say() (a player sink makes its temporary
-        directory now).
+        directory now). `keep` names the settings configure() never changes.
         """
+        self._keep = keep
         self._settings = settings
         self._clock = clock or MonotonicClock()
         self._sink = sink or sink_for(settings)
@@ -87,6 +94,31 @@ class Voice:
     def engine(self) -> str:
         """The configured engine, tried first ("espeak-ng" or "pyttsx3")."""
         return self._settings.engine
+
+    @property
+    def settings(self) -> VoiceSettings:
+        """The settings the next line is spoken with."""
+        return self._settings
+
+    def configure(self, settings: VoiceSettings) -> None:
+        """Speak with `settings` from the next line on: a session's own voice, a reload's.
+
+        The engine, voice, rate, volume, pitch, timeout and clips change; what `keep`
+        names does not (by default where the sound goes: the mouth listens to that sink,
+        and a reload names it as waiting for a restart). A pyttsx3 engine built with the
+        old settings is replaced.
+        """
+        old = self._settings
+        settings = msgspec.structs.replace(
+            settings, **{key: getattr(old, key) for key in self._keep}
+        )
+        if settings == old:
+            return
+        self._settings = settings
+        self._espeak = espeak_argv(settings)
+        engine = self._pyttsx3
+        if engine is not None:
+            self._retire(engine, "the voice's settings changed")
 
     def listen(self, listener: EnvelopeListener | None) -> bool:
         """Tell `listener` the levels of every line as its audio reaches the player (the

@@ -255,7 +255,8 @@ async def _voice(config: Config, speak: bool) -> list[Result]:
             settings = msgspec.structs.replace(settings, wav_dir=scratch)
         voice = Voice(settings, MonotonicClock())
         try:
-            spoken = await voice.say(phrasebook_for(config).render(TEST_KEY, 0))
+            book = phrasebook_for(config)
+            spoken = await voice.say(book.render(TEST_KEY, 0, robot=config.robot_settings.name))
         finally:
             await voice.close()
     if not spoken.finished:

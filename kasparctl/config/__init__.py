@@ -12,6 +12,9 @@ One module per job:
             (load_config, parse_config);
 - explain   msgspec's validation errors in the file's words (key, expected, found);
 - rules     the checks that span several keys or tables;
+- session_settings  one session's settings: its plan, its profile and the robot-wide
+            tables resolved (resolve_session), and read back from plan.json
+            (recorded_session);
 - poses     the poses file (read_poses, check_pose, apply_poses_file);
 - errors    ConfigError, which all of them raise.
 
@@ -64,10 +67,19 @@ from kasparctl.config.schema import (
     LoggingSettings,
     Name,
     ProfileSettings,
+    RobotSettings,
     Seconds,
     SessionPlan,
     UncertaintyMode,
+    VoiceOverrides,
     default_robot_id,
+)
+from kasparctl.config.session_settings import (
+    DEFAULT_ROBOT_NAME,
+    SessionSettings,
+    recorded_game,
+    recorded_session,
+    resolve_session,
 )
 
 __all__ = [
@@ -75,6 +87,7 @@ __all__ = [
     "CODE_PATTERN",
     "CONDITION_LABELS",
     "DEFAULT_CONFIG_PATH",
+    "DEFAULT_ROBOT_NAME",
     "GESTURES",
     "GROUP_CODE_LIMIT",
     "HAPPY_POSE",
@@ -99,9 +112,12 @@ __all__ = [
     "LoggingSettings",
     "Name",
     "ProfileSettings",
+    "RobotSettings",
     "Seconds",
     "SessionPlan",
+    "SessionSettings",
     "UncertaintyMode",
+    "VoiceOverrides",
     "apply_poses_file",
     "check_playable",
     "check_pose",
@@ -110,5 +126,8 @@ __all__ = [
     "load_config",
     "parse_config",
     "read_poses",
+    "recorded_game",
+    "recorded_session",
+    "resolve_session",
     "servo_backend_given",
 ]

@@ -15,9 +15,18 @@ import typing
 
 from kasparctl.config.errors import ConfigError
 from kasparctl.config.poses import check_pose
-from kasparctl.config.schema import SPOKEN_MODES, Config, GameSettings, LearnerSettings, SessionPlan
+from kasparctl.config.schema import (
+    SPOKEN_MODES,
+    Config,
+    GameSettings,
+    LearnerSettings,
+    ProfileSettings,
+    SessionPlan,
+)
+from kasparctl.config.session_settings import resolve_session
 from kasparctl.learning.learner import LearnerError
 from kasparctl.lexicon import LexiconError, words
+from kasparctl.lexicon import resolve as resolve_lexicon
 from kasparctl.vocabulary import MISSING_MARKERS, REQUIRED_COMMANDS, Command
 
 # Raises the ConfigError for a key and a message.
@@ -44,7 +53,7 @@ def validate(config: Config, source: str) -> None:
     _check_interaction(config.game, fail)
     _check_body(config, fail)
     _check_toy_names(config, source)
-
+    _check_word(config.robot_settings.name, "robot.name", NAME_LIMIT, fail)
 
 
 def check_playable(config: Config, source: str) -> None:
@@ -75,6 +84,7 @@ def _check_learner(learner: LearnerSettings, fail: _Fail) -> None:
             profile.params()
         except LearnerError as error:
             fail(f"learner.profiles.{name}.{error.key}", str(error))
+        _check_overrides(profile, f"learner.profiles.{name}", fail)
     _check_profile_name(learner, learner.default_profile, "learner.default_profile", fail)
 
 
@@ -223,8 +233,71 @@ def _check_sessions(config: Config, fail: _Fail) -> None:
         _check_plan(plan, where, config, fail)
 
 
+def _check_overrides(level: ProfileSettings | SessionPlan, where: str, fail: _Fail) -> None:
+    """A session's or a profile's own game values, held as [game]'s are."""
+    if level.toys is not None:
+        _check_words(level.toys, f"{where}.toys", NAME_LIMIT, fail)
+        _check_distinct(level.toys, f"{where}.toys", fail)
+    if level.locations is not None:
+        _check_words(level.locations, f"{where}.locations", NAME_LIMIT, fail)
+        _check_distinct(level.locations, f"{where}.locations", fail)
+    trials = level.max_trials_per_target
+    if trials is not None and not 1 <= trials <= MAX_TRIALS_LIMIT:
+        fail(f"{where}.max_trials_per_target", f"expected 1 to {MAX_TRIALS_LIMIT}, found {trials}")
+
+
+def _check_session_game(plan: SessionPlan, where: str, config: Config, fail: _Fail) -> None:
+    """The game a session plays, its profile's and its own values applied, holds [game]'s
+    rules; the key named is the one that gave the value at fault."""
+    settings = resolve_session(config, plan)
+    game, profile = settings.game, config.learner.all_profiles()[plan.profile]
+
+    def origin(key: str) -> str:
+        if getattr(plan, key, None) is not None:
+            return f"{where}.{key}"
+        if getattr(profile, key, None) is not None:
+            return f"learner.profiles.{plan.profile}.{key}"
+        return f"game.{key}"
+
+    if game.max_trials_per_target < game.correct_answers_to_learn:
+        key = "max_trials_per_target" if plan.max_trials_per_target is not None else (
+            "correct_answers_to_learn"
+        )
+        fail(
+            origin(key),
+            f"expected max_trials_per_target ({game.max_trials_per_target}) >= "
+            f"correct_answers_to_learn ({game.correct_answers_to_learn}) in {where}",
+        )
+    if game.variant == "pilot" and not game.locations:
+        fail(origin("locations"), "expected at least 1 names, found 0")
+    if game.variant == "names" and game.locations:
+        fail(
+            origin("locations"),
+            "only the pilot variant uses locations; remove it or set game.variant = 'pilot'",
+        )
+    if game.variant == "pilot" and game.poses and set(game.poses) != set(game.locations):
+        fail(
+            origin("locations"),
+            f"expected the locations of game.poses ({', '.join(game.poses)}), "
+            f"found {', '.join(game.locations)}",
+        )
+    if game.toys != config.game.toys or settings.language != config.language:
+        try:
+            resolve_words(settings.language, game.toys, config, f"{where}")
+        except LexiconError as error:
+            fail(origin("toys") if game.toys != config.game.toys else origin("language"),
+                 error.message)
+
+
+def resolve_words(language: str, toys: tuple[str, ...], config: Config, source: str) -> None:
+    """Every toy has its words in `language` (LexiconError otherwise)."""
+    resolve_lexicon(language, toys, config.toy_names.get(language, {}), source)
+
+
 def _check_plan(plan: SessionPlan, where: str, config: Config, fail: _Fail) -> None:
     _check_profile_name(config.learner, plan.profile, f"{where}.profile", fail)
+    _check_overrides(plan, where, fail)
+    _check_session_game(plan, where, config, fail)
     _check_word(plan.group, f"{where}.group", GROUP_CODE_LIMIT, fail)
     _check_not_missing((plan.group,), f"{where}.group", "a group code", fail)
     _check_not_missing(plan.children, f"{where}.children", "a first name", fail)
@@ -246,7 +319,8 @@ def _check_plan(plan: SessionPlan, where: str, config: Config, fail: _Fail) -> N
                 f"expected {size} codes (one per {what}), found {len(plan.participants)}",
             )
     if plan.answer_key:
-        _check_answer_key(plan.answer_key, config.game, f"{where}.answer_key", fail)
+        game = resolve_session(config, plan).game
+        _check_answer_key(plan.answer_key, game, f"{where}.answer_key", fail)
     _check_uncertainty(plan, where, fail)
 
 

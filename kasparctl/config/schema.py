@@ -17,7 +17,7 @@ import msgspec
 
 from hal.keyfob.settings import KeyfobSettings, ResearcherSettings
 from hal.servos.settings import ServoSettings
-from hal.voice.settings import VoiceSettings
+from hal.voice.settings import VoiceName, VoiceSettings
 from kasparctl.learning.learner import LearnerParams
 from kasparctl.lexicon import ToyEntry, ToyWords, resolve
 from kasparctl.vocabulary import MAX_CHILDREN
@@ -78,8 +78,45 @@ class LoggingSettings(_Settings, frozen=True):
     format: Literal["auto", "json", "console"] = "auto"
 
 
+# How Kaspar shows how sure it is before each guess: "spoken" (the entropy's line, as in the
+# paper), "body" (its thinking behaviour and the way it points), "both", or "none".
+UncertaintyMode = Literal["spoken", "body", "both", "none"]
+Reactions = Literal["paper", "all", "none"]
+# Movement speed: every joint's speed limit times this, for a session (1: the limits).
+SpeedScale = Annotated[float, msgspec.Meta(ge=0.1, le=1.0)]
+Toys = Annotated[tuple[Name, ...], msgspec.Meta(min_length=2, extra={"item": "name"})]
+PromptDelays = Annotated[
+    tuple[Annotated[float, msgspec.Meta(ge=0.5, le=600.0, extra={"unit": "s"})], ...],
+    msgspec.Meta(min_length=1, extra={"item": "delay"}),
+]
+StepPrompt = Annotated[float, msgspec.Meta(ge=5.0, le=3600.0, extra={"unit": "s"})]
+Language = Annotated[
+    str,
+    msgspec.Meta(
+        pattern=r"^[A-Za-z]{2,3}([_-][A-Za-z0-9]{2,8})*$",
+        extra={"expected": "a language code such as 'en', 'nl', 'de', 'it' or 'fr'"},
+    ),
+]
+Rate = Annotated[int, msgspec.Meta(ge=80, le=450, extra={"unit": "words per minute"})]
+Volume = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+Pitch = Annotated[int, msgspec.Meta(ge=0, le=99)]
+# The keys of a profile that are the learner's own (LearnerParams').
+LEARNER_KEYS = ("alpha", "beta", "gamma", "reward_green", "reward_red", "initial_q")
+
+
+class VoiceOverrides(_Settings, frozen=True):
+    """A session's or a profile's voice: each key unset takes the next level's ([voice])."""
+
+    engine: Literal["pyttsx3", "espeak-ng"] | None = None
+    voice: VoiceName | None = None
+    rate: Rate | None = None
+    volume: Volume | None = None
+    pitch: Pitch | None = None
+
+
 class ProfileSettings(_Settings, frozen=True):
-    """A named learner profile; unset values take the paper's.
+    """A named learner profile; unset values take the paper's. Its other keys shape
+    every session of the profile.
 
     The limits are LearnerParams', checked by kasparctl.config.rules: one definition of a
     usable learner, shared with the simulator, which builds LearnerParams directly.
@@ -91,15 +128,26 @@ class ProfileSettings(_Settings, frozen=True):
     reward_green: float = 1.0
     reward_red: float = -1.0
     initial_q: float = 0.0
-    # Greens in a row this learner needs to learn a name (None: [game]'s). Alpha and beta
-    # alone cannot make Kaspar visibly faster (the right toy is still found among six), so
-    # this is the lever children perceive: docs/simulation.md, "fast, paper and slow".
-    correct_answers_to_learn: Annotated[int, msgspec.Meta(ge=1, le=30)] | None = None
+    # What the profile gives every session that uses it, beside its learner; unset, the
+    # robot-wide key of the same name ([game], [voice], language). A [[sessions]] entry's
+    # own keys of the same names come first (kasparctl.config.session_settings).
+    toys: Toys | None = None
+    locations: tuple[Name, ...] | None = None
+    correct_answers_to_learn: Annotated[int, msgspec.Meta(ge=1)] | None = None
+    max_trials_per_target: int | None = None
+    script: Literal["paper", "varied"] | None = None
+    uncertainty: UncertaintyMode | None = None
+    prompt_after_s: PromptDelays | None = None
+    step_prompt_after_s: StepPrompt | None = None
+    reactions: Reactions | None = None
+    alive: bool | None = None
+    speed_scale: SpeedScale | None = None
+    language: Language | None = None
+    voice: VoiceOverrides | None = None
 
     def params(self) -> LearnerParams:
         """The learner these settings describe; LearnerError names an unusable value."""
-        values = msgspec.structs.asdict(self)
-        return LearnerParams(**{key: values[key] for key in LEARNER_KEYS})
+        return LearnerParams(**{name: getattr(self, name) for name in LEARNER_KEYS})
 
     def shaped(self, game: GameSettings) -> GameSettings:
         """`game` with this profile's game-shaping values over it (robot-wide < profile)."""
@@ -107,9 +155,6 @@ class ProfileSettings(_Settings, frozen=True):
             return game
         return msgspec.structs.replace(game, correct_answers_to_learn=self.correct_answers_to_learn)
 
-
-# The keys of a profile that are the learner's own (Eq. 1-3); the others shape the game.
-LEARNER_KEYS = ("alpha", "beta", "gamma", "reward_green", "reward_red", "initial_q")
 
 # "fast" and "slow" are the paper's future-work learners, designed with `kasparctl simulate`
 # to be told apart by children (docs/simulation.md, "fast, paper and slow"): the number of
@@ -211,9 +256,12 @@ class GameSettings(_Settings, frozen=True):
     # turn it is not is recorded and not taken ("ignore"), or taken as the answer and
     # credited to that child ("take"). A session's plan may choose its own.
     answer_out_of_turn: OutOfTurn = "ignore"
-    # Kaspar's face after an answer (the words are said whatever it is): "paper", happy on
-    # learning a name only, as the paper's Kaspar; "all", happy after every green and sad
-    # after every red (sadness may push children towards false greens); "none".
+    # Gaze and life for every session that does not say (a session's `alive`, its profile's).
+    alive: bool = True
+    # Every joint's speed limit times this in a session: a slower robot (0.1 to 1).
+    speed_scale: SpeedScale = 1.0
+    # Kaspar's expressions after an answer: "paper" (happy on learning a name only, as in
+    # the paper), "all" (happy on learning, sad after a red) or "none".
     reactions: Literal["paper", "all", "none"] = "paper"
     # Step 2: a green with the arm within this many degrees (every joint of the pointing
     # arm) of its rest pose or of the bag shown just before is taken for an arm nobody
@@ -242,9 +290,6 @@ class GameSettings(_Settings, frozen=True):
         return self.exclude_learned_rule == "always"
 
 
-# How Kaspar shows how sure it is before each guess: "spoken" (the entropy's line, as in the
-# paper), "body" (its thinking behaviour and the way it points), "both", or "none".
-UncertaintyMode = Literal["spoken", "body", "both", "none"]
 UNCERTAINTY_MODES: tuple[UncertaintyMode, ...] = ("spoken", "body", "both", "none")
 # The modes in which Kaspar says it (speak_uncertainty = true).
 SPOKEN_MODES = ("spoken", "both")
@@ -275,7 +320,8 @@ class SessionPlan(_Settings, frozen=True):
     speak_uncertainty: bool | None = None
     # Gaze and life: Kaspar looks at the child whose turn it is, at the bag it points at and
     # at the researcher, blinks and moves a little; false keeps all of it still this session.
-    alive: bool = True
+    # Not given: the profile's, else game.alive.
+    alive: bool | None = None
     # First names are optional; without them Kaspar says "child one", "child two"...
     children: Annotated[
         tuple[Name, ...], msgspec.Meta(max_length=MAX_CHILDREN, extra={"item": "name"})
@@ -290,6 +336,19 @@ class SessionPlan(_Settings, frozen=True):
     answer_key: tuple[str, ...] = ()
     # With one keyfob per child: this session's game.answer_out_of_turn.
     answer_out_of_turn: OutOfTurn | None = None
+    # What this session's group experiences, each unset taking its profile's, then the
+    # robot-wide key of the same name ([game], [voice], language): see
+    # kasparctl.config.session_settings, which resolves them, and docs/configuration.md.
+    toys: Toys | None = None
+    locations: tuple[Name, ...] | None = None
+    correct_answers_to_learn: Annotated[int, msgspec.Meta(ge=1)] | None = None
+    max_trials_per_target: int | None = None
+    prompt_after_s: PromptDelays | None = None
+    step_prompt_after_s: StepPrompt | None = None
+    reactions: Reactions | None = None
+    speed_scale: SpeedScale | None = None
+    language: Language | None = None
+    voice: VoiceOverrides | None = None
 
     @property
     def uncertainty_mode(self) -> UncertaintyMode:
@@ -369,6 +428,15 @@ class BodySettings(_Settings, frozen=True):
     gaze: GazeSettings = GazeSettings()
 
 
+class RobotSettings(_Settings, frozen=True):
+    """The `[robot]` table: who this robot is to the children and in the records."""
+
+    # Said in the greeting ("I am Kaspar"): two robots of one study can be told apart.
+    name: Annotated[str, msgspec.Meta(pattern=r"^\S(.*\S)?$", extra={"expected": "a name"})] = (
+        "Kaspar"
+    )
+
+
 class Config(_Settings, frozen=True):
     """The whole of kaspar.toml, every table with its defaults."""
 
@@ -410,6 +478,8 @@ class Config(_Settings, frozen=True):
     # The planned sessions in a file of their own (`kasparctl plan` writes one per robot),
     # relative to this file, instead of [[sessions]] here (kasparctl.config.sessions_file).
     sessions_file: str | None = None
+    # [robot]; `robot()` is the robot's id (robot_id), this its table.
+    robot_settings: RobotSettings = msgspec.field(default_factory=RobotSettings, name="robot")
 
     def profile(self, name: str | None = None) -> LearnerParams:
         """A profile's learner (the default profile's without a name); KeyError if unknown."""

@@ -141,7 +141,7 @@ class BodyWork:
     def lively(self) -> bool:
         """Gaze and life are allowed this session (the plan's `alive`; no plan: yes)."""
         plan = self._plan()
-        return plan is None or plan.alive
+        return plan is None or plan.alive is not False
 
     def strength(self, entropy_bits: float, candidates: int) -> float | None:
         """The thinking behaviour's strength for a guess, or None where the plan's

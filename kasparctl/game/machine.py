@@ -58,7 +58,7 @@ from hal.keyfob.api import InputEvent, KeyfobBack, KeyfobLost
 from hal.keyfob.gestures import Gesture
 from hal.servos.api import Fault
 from kasparctl.body.api import Body, GazeKind
-from kasparctl.config import Config, SessionPlan
+from kasparctl.config import Config, SessionPlan, SessionSettings, resolve_session
 from kasparctl.game import recovery, rotation
 from kasparctl.game.battery import BatteryWatch
 from kasparctl.game.bodywork import GREETING, BodyWork
@@ -76,6 +76,7 @@ from kasparctl.game.faults import (
 )
 from kasparctl.game.guess import LISTENING_SOUND
 from kasparctl.game.inputs import FromResearcher, GameInput, Inputs, StepEnded, describe
+from kasparctl.game.language import phrasebook_for
 from kasparctl.game.opening import OpenedSession, PlanQueue, session_script
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.presses import ChildPresses
@@ -262,6 +263,9 @@ class Game:
         self._seen_faults: set[Fault] = set()
         self.plan: SessionPlan | None = None
         self.session_state: GameState | None = None
+        # The open session's settings; until one opens, the robot-wide ones apply.
+        self.session_settings: SessionSettings | None = None
+        self.picker.robot = config.robot_settings.name
         self.resumed = start.resumed is not None
         self.stopped_waiting = start.stopped
         self._inputs = Inputs()
@@ -699,10 +703,24 @@ class Game:
         self._emit(GameEvent.SESSION, session=session.id)
 
     def _take_session(self, opened: OpenedSession) -> None:
-        """The game plays `opened` from now on: its records go there, in its script's words."""
-        session, self.plan, self.session_state = opened
+        """The game plays `opened` from now on: its records go there, in its script's words,
+        with its own settings (game, learner, voice, speed, language: SessionSettings)."""
+        session, plan, self.session_state, settings = opened
+        self.session_settings = settings or resolve_session(self.config, plan)
+        self.plan = self.session_settings.plan
+        self.settings = self.session_settings.game
         self.recorder.to(session)
         self._use_script(session_script(session))
+        self._apply_session_settings(self.session_settings)
+
+    def _apply_session_settings(self, settings: SessionSettings) -> None:
+        """The voice, the joints' speed and the phrase book as the session has them."""
+        self.hw.voice.configure(settings.voice)
+        self.hw.servos.scale_speeds(settings.speed_scale)
+        config = self.config
+        if settings.language != config.language or settings.game.toys != config.game.toys:
+            self.picker.book = phrasebook_for(settings.config(config))
+        self.picker.robot = settings.robot_name
 
     def _use_script(self, chosen: Script) -> None:
         self.script = chosen
@@ -874,7 +892,7 @@ class Game:
             settings=self.settings,
             opened=opened,
             script=self.script,
-            params=config.profile(opened.plan.profile),
+            params=self._require_settings().learner,
             group_size=config.group_size(opened.plan),
             joint_ranges={joint.name: joint.range_deg for joint in config.servos.joints},
             rest_pose={joint.name: joint.rest_deg for joint in config.servos.joints},
@@ -1077,6 +1095,11 @@ class Game:
         if self.session_state is None:
             raise RuntimeError("no session is open")
         return self.session_state
+
+    def _require_settings(self) -> SessionSettings:
+        if self.session_settings is None:
+            raise RuntimeError("no session is open")
+        return self.session_settings
 
     def _require_plan(self) -> SessionPlan:
         if self.plan is None:

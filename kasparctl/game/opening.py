@@ -18,7 +18,8 @@ from typing import Any, NamedTuple
 
 import msgspec
 
-from kasparctl.config import Config, SessionPlan
+from kasparctl import __version__
+from kasparctl.config import Config, SessionPlan, SessionSettings, resolve_session
 from kasparctl.game import recovery
 from kasparctl.game.jsonl import UNDECODABLE, read_records
 from kasparctl.game.records import SessionEvent, SessionRecord
@@ -41,15 +42,23 @@ class OpenedSession(NamedTuple):
     session: Session
     plan: SessionPlan
     state: GameState
+    # What it plays with (kasparctl.config.session_settings); None: read from its plan.json.
+    settings: SessionSettings | None = None
 
 
-def planned(config: Config, plan: SessionPlan, seed: int | None) -> dict[str, Any]:
+def planned(
+    config: Config, plan: SessionPlan, seed: int | None, settings: SessionSettings | None = None
+) -> dict[str, Any]:
     """A session's plan.json (less its id and creation time, which Session.create adds).
 
     The group, its session number, the condition, the variant, the learner's seed,
-    the uncertainty script and its version, the language, and the plan entry itself.
+    the uncertainty script and its version, the language, the plan entry itself, the
+    robot (id and name), kasparctl's version and every setting the group experiences
+    (`settings`: SessionSettings.block, resolved from `config` unless given).
     """
-    chosen = script(config.script(plan))
+    settings = settings or resolve_session(config, plan)
+    plan = settings.plan
+    chosen = script(settings.game.script)
     seats = config.keyfob.children
     seating: dict[str, Any] = {}
     if seats:
@@ -66,18 +75,21 @@ def planned(config: Config, plan: SessionPlan, seed: int | None) -> dict[str, An
         "group": plan.group,
         "number": plan.number,
         "condition": plan.condition,
-        "variant": config.game.variant,
+        "variant": settings.game.variant,
         "seed": seed,
         "script": chosen.name,
         "script_version": chosen.version,
         # What Kaspar spoke (sessions planned before languages were recorded spoke "en").
-        "language": config.language,
+        "language": settings.language,
         # Confusion noticed, names re-opened (kasparctl.game.recovery); absent before.
         "recovery": recovery.RECOVERY_VERSION,
         "uncertainty": plan.uncertainty_mode,
         "plan": msgspec.to_builtins(plan.resolved()),
         # Frozen at the start: a resume uses these, whatever the configuration says then.
-        "learner": frozen_learner(plan.profile, config.profile(plan.profile)),
+        "learner": frozen_learner(plan.profile, settings.learner),
+        "robot": settings.robot_block(),
+        "kasparctl_version": __version__,
+        "settings": settings.block(),
     }
 
 
@@ -86,9 +98,10 @@ def open_new(state_dir: Path, config: Config, plan: SessionPlan, seed: int) -> O
 
     StorageFailed when its directory or plan cannot be written.
     """
-    session = Session.create(state_dir, planned(config, plan, seed), robot=config.robot())
-    state = GameState.new(config.game, config.profile(plan.profile), seed)
-    return OpenedSession(session, plan, state)
+    settings = resolve_session(config, plan)
+    session = Session.create(state_dir, planned(config, plan, seed, settings))
+    state = GameState.new(settings.game, settings.learner, seed)
+    return OpenedSession(session, settings.plan, state, settings)
 
 
 def session_script(session: Session) -> Script:
@@ -257,11 +270,12 @@ class PlanQueue:
         if event is SessionEvent.PRESENT:
             return  # never marked: nothing to take back
         session = Session.create(
-            self.state_dir, {**planned(config, plan, None), "absent": True}, robot=config.robot()
+            self.state_dir, {**planned(config, plan, None), "absent": True}
         )
         try:
             session.record(SessionRecord(event=event, state="idle"), clock)
-            state = GameState.new(config.game, config.profile(plan.profile), None)
+            settings = resolve_session(config, plan)
+            state = GameState.new(settings.game, settings.learner, None)
             session.save_state(state, finished=True)
         finally:
             session.close()

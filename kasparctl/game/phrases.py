@@ -85,6 +85,10 @@ def _spec(*placeholders: str, variety: int = 1, sentences: int = 2, about: str =
     return LineSpec(frozenset(placeholders), variety, sentences, about)
 
 
+# A placeholder the caller may leave out, and what it then says: the robot's name is
+# known to the book only as its default (a game's picker gives the configured one).
+DEFAULT_VALUES: Final[Mapping[str, str]] = MappingProxyType({"robot": "Kaspar"})
+
 # Said before nearly every guess or answer: the varied script needs choices.
 _OFTEN: Final = 3
 
@@ -92,7 +96,8 @@ _OFTEN: Final = 3
 # Placeholders are filled with text: {bag} and {bags} a bag's number and how many
 # there are ("3", "6"); {toy} a toy's name; {location} a pilot location's name;
 # {where} how a location is said in a sentence ("in the box"); {child}, {mover},
-# {presser} a child's first name or names.child; {number} a child's number.
+# {presser} a child's first name or names.child; {number} a child's number; {robot} the
+# robot's own name ([robot] name, "Kaspar" by default), in the greeting.
 # A line whose key takes {toy} is given the toy's id and may say any of its forms
 # (TOY_FORMS, kasparctl.lexicon): {toy} the noun alone, {the_toy} with its article.
 REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
@@ -103,7 +108,9 @@ REQUIRED_LINES: Final[Mapping[str, LineSpec]] = MappingProxyType(
         "names.where": _spec(
             "location", sentences=1, about="a pilot location with no phrase of its own"
         ),
-        "session.greeting": _spec(sentences=3, about="first words of a session"),
+        "session.greeting": _spec(
+            "robot", sentences=3, about="first words of a session ({robot}: [robot] name)"
+        ),
         "session.resumed": _spec(about="a session carries on after a restart"),
         "session.thanks": _spec(sentences=3, about="the end of a session: thanks and goodbye"),
         "steps.place_bags": _spec("bags", about="step 1: the numbered bags go in places"),
@@ -245,8 +252,14 @@ class PhraseBook:
         variants = self.variants(key)
         if not 0 <= index < len(variants):
             self._fail(key, f"expected a variant index 0 to {len(variants) - 1}, found {index}")
+        values = {**self._defaults(key, values), **values}
         self.check_values(key, values)
         return variants[index].format_map(self._with_toy_forms(key, values))
+
+    def _defaults(self, key: str, values: Mapping[str, str]) -> dict[str, str]:
+        """The placeholders of `key` that have a default (DEFAULT_VALUES) and are not given."""
+        allowed = self.placeholders[key]
+        return {k: v for k, v in DEFAULT_VALUES.items() if k in allowed and k not in values}
 
     def _with_toy_forms(self, key: str, values: Mapping[str, str]) -> Mapping[str, str]:
         """`values` with the toy's id replaced by its forms in this book's language."""
@@ -335,7 +348,9 @@ def limit_problems(book: PhraseBook, values: Mapping[str, str]) -> list[str]:
     problems = []
     for key, variants in book.lines.items():
         spec = REQUIRED_LINES.get(key, _spec())
-        filled = {name: values[name] for name in book.placeholders[key]}
+        filled = {
+            name: values.get(name, DEFAULT_VALUES.get(name, "")) for name in book.placeholders[key]
+        }
         for index in range(len(variants)):
             said = sentences(book.fill(key, index, **filled), book.language)
             if len(said) > spec.max_sentences:
@@ -365,6 +380,8 @@ class PhrasePicker:
         """Pick from `book`, drawing with `rng` (never, when `fixed`)."""
         self.book = book
         self.fixed = fixed
+        # The robot's name ([robot] name), said where a line has {robot} (the greeting).
+        self.robot = "Kaspar"
         self._rng = rng
         self._last: dict[str, int] = {}
 
@@ -372,6 +389,8 @@ class PhrasePicker:
         """A variant of `key` filled in with `values`: the first when fixed, else not the
         one this picker said last."""
         variants = self.book.variants(key)
+        if "robot" in self.book.placeholders[key] and "robot" not in values:
+            values = {**values, "robot": self.robot}  # this robot's own name
         # Validate before drawing, so a bad call neither consumes randomness nor memory.
         self.book.check_values(key, values)
         if self.fixed:

@@ -20,7 +20,16 @@ from typing import Any
 import msgspec
 import structlog
 
-from kasparctl.config import Config, GameSettings, ProfileSettings, SessionPlan
+from kasparctl.config import (
+    Config,
+    ConfigError,
+    GameSettings,
+    ProfileSettings,
+    SessionPlan,
+    SessionSettings,
+    recorded_game,
+    recorded_session,
+)
 from kasparctl.game.jsonl import encode_record, line_seq, read_json_lines, read_records
 from kasparctl.game.records import SessionEvent, SessionRecord
 from kasparctl.game.session import (
@@ -62,6 +71,12 @@ class Resumable:
     state: GameState
     # The learner the session began with (frozen in its plan), or its profile's.
     params: LearnerParams
+
+    def settings(self, config: Config) -> SessionSettings:
+        """What the session plays with: its plan.json's `settings` (a session recorded
+        before them: `config`'s robot-wide values, as it had then)."""
+        source = str(self.session.directory / PLAN_FILE)
+        return recorded_session(self.session.plan, config, self.plan, self.params, source)
 
     def config(self, config: Config) -> Config:
         """`config` with the plan's profile being the learner the session began with, so a
@@ -135,6 +150,11 @@ def reopen(
     except (msgspec.MsgspecError, UnicodeDecodeError, KeyError) as error:
         raise CannotResume(directory, f"{plan_path}: not a session plan: {error}") from error
     params = _learner_of(plan_json, session_plan, profile, directory)
+    try:
+        # The game it was recorded with, whatever [game] says now.
+        game = recorded_game(plan_json, game, str(plan_path))
+    except ConfigError as error:
+        raise CannotResume(directory, str(error)) from error
     try:
         session, _warnings = Session.open(directory)
     except SessionError as error:

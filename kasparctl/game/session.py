@@ -35,7 +35,7 @@ from typing import Any, TypeVar
 import msgspec
 import structlog
 
-from kasparctl.config import default_robot_id
+from kasparctl.config import DEFAULT_ROBOT_NAME, default_robot_id
 from kasparctl.game.jsonl import (
     UNDECODABLE,
     RecordsRead,
@@ -213,8 +213,9 @@ class Session:
 
         The directory's name (its start time and group) is readable but not unique
         across robots or state directories; plan.json also holds `uid`, a ULID no
-        other session anywhere has, `robot`, the robot's id (`robot`, else the
-        plan's, else kasparctl.config.default_robot_id()), and `sequence`, its place
+        other session anywhere has, `robot`, the robot's id and name (the plan's
+        `robot` object, else {"id": `robot` or kasparctl.config.default_robot_id(),
+        "name": "Kaspar"}), and `sequence`, its place
         among the state directory's sessions (the wall clock may be wrong: see
         session_order).
 
@@ -237,7 +238,8 @@ class Session:
         full_plan = {
             "session": session_id,
             "uid": new_ulid(now, after=last_uid),
-            "robot": robot or plan.get("robot") or default_robot_id(),
+            # The robot's id and name (the plan's own, from kasparctl.game.opening).
+            "robot": _robot(plan, robot),
             "created": utc_now(),
             "sequence": sequence + 1,
             **plan,
@@ -452,6 +454,22 @@ SAFE_NAME_LIMIT = 64
 def _safe_name(text: str) -> str:
     safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("._")[:SAFE_NAME_LIMIT].strip("._")
     return safe or "group"
+
+
+def _robot(plan: dict[str, Any], robot: str | None) -> dict[str, Any]:
+    given = plan.get("robot")
+    if isinstance(given, dict):
+        return given
+    return {"id": robot or given or default_robot_id(), "name": DEFAULT_ROBOT_NAME}
+
+
+def robot_id(plan: dict[str, Any]) -> str | None:
+    """The id of the robot that recorded a session: plan.json's `robot`, an object since
+    robots have names, a string before; None for sessions older than robot ids."""
+    robot = plan.get("robot")
+    if isinstance(robot, dict):
+        robot = robot.get("id")
+    return robot if isinstance(robot, str) else None
 
 
 def session_dirs(state_dir: Path) -> Iterator[Path]:

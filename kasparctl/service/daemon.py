@@ -72,6 +72,7 @@ from kasparctl.game.stages import ENDS
 from kasparctl.game.storage import StorageFailed
 from kasparctl.game.wallclock import ClockWatch
 from kasparctl.log import configure_logging
+from kasparctl.service.applying import restart_only
 from kasparctl.service.batteries import low_batteries
 from kasparctl.service.reload import Outcome, ReloadDesk, runtime_directory
 from kasparctl.service.sdnotify import Notifier, watchdog_interval
@@ -316,6 +317,7 @@ class Daemon:
         faults, self._pending_faults = self._pending_faults, []
         game = self._new_game(resumed, stopped, faults)
         await self._play(game)
+        self._robot_wide()
         # What the disk still refuses is written by the next game (or before the next read).
         self.lasting.recorder.flush()
         self.lasting.problems.game_ended()
@@ -325,6 +327,17 @@ class Daemon:
             game.stopped_waiting.session.close()  # neither reopened nor closed in this game
         if self._reload:
             self._apply_reload()
+
+    def _robot_wide(self) -> None:
+        """The voice and the joints' speed as the robot has them, a session's own ended
+        (the next game's session takes its own)."""
+        if self.hw is None:
+            return
+        try:
+            self.hw.voice.configure(self.config.voice)
+            self.hw.servos.scale_speeds(self.config.game.speed_scale)
+        except Exception as error:  # never the end of the robot: logged, the next game goes on
+            log.error("the robot-wide voice or speed could not be restored", error=str(error))
 
     def _read_sessions(self) -> tuple[OpenedSession | None, OpenedSession | None]:
         """The session to resume, or else the stopped one waiting for the researcher.
@@ -480,7 +493,7 @@ class Daemon:
             self._notice = f"session {session.id} resumed after a crash: " + "; ".join(
                 session.repairs
             )
-        return OpenedSession(session, resumable.plan, state)
+        return OpenedSession(session, resumable.plan, state, resumable.settings(self.config))
 
     def _note_abandoned(self, abandoned: Abandoned, clock: float) -> None:
         """Shown in STATUS=, said when the game begins, and in the event log."""
@@ -546,7 +559,8 @@ class Daemon:
             return None
         self._resumable = resumable
         log.info("a stopped session waits: next reopens it, stop closes it", session=latest.name)
-        return OpenedSession(resumable.session, resumable.plan, resumable.state)
+        settings = resumable.settings(self.config)
+        return OpenedSession(resumable.session, resumable.plan, resumable.state, settings)
 
     # -- signals, reload, watchdog ------------------------------------------------------
 
@@ -573,29 +587,22 @@ class Daemon:
         try:
             config = self._load()
             book = phrasebook_for(config)
-            if config.language != self.config.language:
-                # The voice is built at the start: the words must not change without it.
-                raise ConfigError(
-                    "reload",
-                    "language",
-                    f"expected {self.config.language!r} until the service restarts "
-                    f"(the voice changes with it), found {config.language!r}",
-                )
+            config, kept = restart_only(self.config, config, self.state_dir)
+            if self.hw is not None:
+                # The voice takes the new engine, voice, rate, volume and pitch now; each
+                # session then speaks with its own (kasparctl.config.session_settings).
+                self.hw.voice.configure(config.voice)
         except Exception as error:  # a bad file must not stop the robot
             log.error("reload failed; keeping the running configuration", error=str(error))
             for token in tokens:
                 self._reload_desk.answer(token, Outcome.FAILED, str(error))
             return
-        if config.body != self.config.body:
-            log.warning("body: takes effect at the next restart (the body is built at the start)")
-        if Path(config.state_dir) != self.state_dir:
+        for key in kept:
             log.warning(
-                "state_dir changed: takes effect at the next restart",
-                running=str(self.state_dir),
-                configured=config.state_dir,
+                "reload: takes effect at the next restart; the running value is kept", key=key
             )
         self.config, self._book = config, book
-        log.info("configuration reloaded", sessions=len(self.config.sessions))
+        log.info("configuration reloaded", sessions=len(self.config.sessions), restart_only=kept)
         for token in tokens:
             self._reload_desk.answer(token, Outcome.RELOADED)
 

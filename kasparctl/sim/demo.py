@@ -38,11 +38,18 @@ from hal.voice.api import VoiceOutput
 from hal.voice.sim import SimVoice
 from kasparctl.body.api import Body, StillBody
 from kasparctl.body.build import make_body
-from kasparctl.config import Config, SessionPlan, UncertaintyMode, parse_config
+from kasparctl.config import (
+    Config,
+    GameSettings,
+    SessionPlan,
+    UncertaintyMode,
+    parse_config,
+    resolve_session,
+)
 from kasparctl.game.events import GameEvent, Listener
 from kasparctl.game.language import phrasebook_for
 from kasparctl.game.machine import Game, Lasting, Setup, Start
-from kasparctl.game.opening import OpenedSession, open_new
+from kasparctl.game.opening import OpenedSession, PlanQueue, open_new
 from kasparctl.game.phrases import PhrasePicker
 from kasparctl.game.records import (
     AnyRecord,
@@ -341,7 +348,13 @@ def build(
     clock = LoopClock()
     servos = SimServos(config.servos, clock)
     also = recorded_voice(config, options.voice, options.state_dir)
-    voice = SimVoice(options.out, clock, clips=config.voice.clips, also=also)
+    voice = SimVoice(
+        options.out,
+        clock,
+        clips=config.voice.clips,
+        also=also,
+        prefix=config.robot_settings.name,
+    )
     return assemble(config, options, servos, voice, children_answers, body=body)
 
 
@@ -360,8 +373,21 @@ def assemble(
     clock = LoopClock()
     out = options.out
 
+    early: list[str] = []
+
     def narrate(text: str) -> None:
-        out.write(f"[{clock.now():10.3f}]   ({text})\n")
+        try:
+            now = clock.now()
+        except RuntimeError:  # built before its loop runs: told when the game begins
+            early.append(text)
+            return
+        while early:
+            out.write(f"[{now:10.3f}]   ({early.pop(0)})\n")
+        out.write(f"[{now:10.3f}]   ({text})\n")
+
+    def tell_early(event: GameEvent, info: dict[str, Any]) -> None:
+        if early:
+            narrate(early.pop())
 
     researcher = None
     if config.researcher.source == "device":
@@ -380,7 +406,7 @@ def assemble(
         keyfob = SimKeyfob(clock, commands=keypad)
     book = phrasebook_for(config)
     picker = PhrasePicker(book, np.random.default_rng([options.seed, 2]))
-    plan = config.sessions[0] if config.sessions else SessionPlan(group="demo")
+    plan = _demo_plan(config, PlanQueue(options.state_dir, lambda: config), clock, narrate)
     if options.uncertainty is not None:
         mode = options.uncertainty
         plan = msgspec.structs.replace(plan, uncertainty=mode, speak_uncertainty=None)
@@ -391,14 +417,19 @@ def assemble(
     resumed = None
     if outcome.resumable is not None:
         resumable = outcome.resumable
-        resumed = OpenedSession(resumable.session, resumable.plan, resumable.state)
+        settings = resumable.settings(config)
+        resumed = OpenedSession(resumable.session, resumable.plan, resumable.state, settings)
         plan = resumed.plan
+        narrate(f"resuming group {plan.group}, session {plan.number}")
         config = outcome.resumable.config(config)
-    answers = _answers(config, plan, options.seed)
+    else:
+        settings = resolve_session(config, plan)
+    game_settings = settings.game
+    answers = _answers(game_settings, plan, options.seed)
 
     def open_session() -> OpenedSession:
         with_key = msgspec.structs.replace(
-            plan, answer_key=tuple(config.game.toys[a] for a in answers)
+            plan, answer_key=tuple(game_settings.toys[a] for a in answers)
         )
         return open_new(options.state_dir, config, with_key, options.seed)
 
@@ -443,6 +474,7 @@ def assemble(
             patience=patience,
         )
         game.listeners.append(children)
+    game.listeners.insert(0, tell_early)
     game.listeners.append(_narrator(narrate))
     transcript = out if isinstance(out, Transcript) else None
     motion = MotionRecord(servos, options.motion) if options.motion is not None else None
@@ -617,11 +649,36 @@ async def _play_until(game: Game, *stops: asyncio.Event) -> str:
     return game.stage if playing.cancelled() else playing.result()
 
 
-def _answers(config: Config, plan: SessionPlan, seed: int) -> list[int]:
-    """The right toy of each target: the plan's answer key, or one drawn for the demo."""
+def _answers(game: GameSettings, plan: SessionPlan, seed: int) -> list[int]:
+    """The right toy of each target (the session's toys): the plan's answer key, or one
+    drawn for the demo."""
     if plan.answer_key:
-        return [config.game.toys.index(toy) for toy in plan.answer_key]
-    return list(draw_answer_key(config.game, np.random.default_rng([seed, 3])))
+        return [game.toys.index(toy) for toy in plan.answer_key]
+    return list(draw_answer_key(game, np.random.default_rng([seed, 3])))
+
+
+def _demo_plan(
+    config: Config, queue: PlanQueue, clock: LoopClock, narrate: Callable[[str], None]
+) -> SessionPlan:
+    """The planned session the demo plays, said: the first not yet ended in this state
+    directory, as the service's "next" would open it (the last again once all are)."""
+    plans = config.sessions
+    if not plans:
+        return SessionPlan(group="demo")
+    offer = queue.chosen()
+    plan = queue.take(clock.now)
+    place = plans.index(plan) + 1
+    if offer is None:
+        narrate(
+            f"every planned session has been played in this state directory; playing the "
+            f"last again: group {plan.group}, session {plan.number}"
+        )
+    else:
+        narrate(
+            f"planned session {place} of {len(plans)}: group {plan.group}, "
+            f"session {plan.number}"
+        )
+    return plan
 
 
 def _narrator(narrate: Callable[[str], None]) -> Listener:

@@ -25,7 +25,7 @@ import msgspec
 from hal.clock import LoopClock
 from hal.servos.api import Goal, ServoApi
 from hal.voice.api import VoiceOutput
-from hal.voice.speaker import Voice
+from hal.voice.speaker import WHERE_SOUND_GOES, Voice
 from kasparctl.config import Config
 
 HEADER = ("time_s", "joint", "position_deg")
@@ -86,4 +86,5 @@ def recorded_voice(config: Config, engine: str | None, state_dir: Path) -> Voice
         return None
     folder = config.voice.wav_dir or str(state_dir / VOICE_DIR)
     settings = msgspec.structs.replace(config.voice, engine=engine, wav_dir=folder)
-    return Voice(settings, LoopClock())
+    # A session's voice changes its voice, rate, volume and pitch, never the engine asked for.
+    return Voice(settings, LoopClock(), keep=(*WHERE_SOUND_GOES, "engine"))
