@@ -28,7 +28,6 @@ import io
 import multiprocessing
 import os
 import pstats
-import resource
 import shutil
 import subprocess
 import sys
@@ -175,20 +174,36 @@ def ensure_sessions(cache: Path, count: int, games: int, fresh: bool) -> None:
     print(f"made in {time.perf_counter() - started:.0f} s")
 
 
-def run(argv: list[str]) -> tuple[float, float]:
-    """One kasparctl command in a child process: its wall time (s) and peak RSS (MB)."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+# Runs one command and reports its own peak RSS (kB on Linux) as its last line on stderr.
+MEASURED = """
+import resource, sys
+from kasparctl.cli import main
+code = main(sys.argv[1:])
+print("maxrss", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)
+sys.exit(code)
+"""
+
+
+def run(argv: list[str], code: Path | None = None) -> tuple[float, float]:
+    """One kasparctl command in a child process: its wall time (s) and peak RSS (MB).
+
+    `code`: a checkout of another version of kasparctl to run instead of this one."""
+    environment = dict(os.environ)
+    if code is not None:
+        environment["PYTHONPATH"] = str(code)
     started = time.perf_counter()
     done = subprocess.run(
-        [sys.executable, "-m", "kasparctl", *argv], capture_output=True, text=True, check=False
+        [sys.executable, "-c", MEASURED, *argv],
+        capture_output=True,
+        text=True,
+        check=False,
+        env=environment,
     )
     elapsed = time.perf_counter() - started
     if done.returncode != 0:
         sys.exit(f"kasparctl {' '.join(argv)} failed with {done.returncode}:\n{done.stderr}")
-    # ru_maxrss of children is the largest child so far (kB on Linux): each command
-    # is measured before a larger one can hide it, the export (smaller) after the report.
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    return elapsed, max(peak, before) / 1024
+    peak = int(done.stderr.strip().splitlines()[-1].split()[1])
+    return elapsed, peak / 1024
 
 
 def profiled(argv: list[str], where: Path) -> None:
@@ -217,6 +232,13 @@ def bench() -> None:
     )
     parser.add_argument("--fresh", action="store_true")
     parser.add_argument("--profile", type=Path, default=None, metavar="FILE")
+    parser.add_argument(
+        "--against",
+        type=Path,
+        default=None,
+        metavar="CHECKOUT",
+        help="also time the report of another version (a checkout, e.g. the main branch's)",
+    )
     parser.add_argument("--keep", type=Path, default=None, metavar="DIR", help="keep the report")
     arguments = parser.parse_args()
     cache = arguments.cache or Path.home() / ".cache" / "kasparctl" / (
@@ -236,6 +258,8 @@ def bench() -> None:
             "--out",
             str(out / "report"),
         ]
+        if arguments.against:
+            other_s, other_mb = run([*report[:-1], str(out / "other")], arguments.against)
         report_s, report_mb = run(report)
         export_s, _ = run(["export", "--state-dir", str(cache), "--csv", str(out / "trials.csv")])
         rows = (out / "trials.csv").read_text().count("\n") - 1
@@ -249,6 +273,11 @@ def bench() -> None:
     print(f"{arguments.sessions} sessions, {rows} trial rows, {len(figures)} PNG pages")
     print(f"report: {report_s:.1f} s (target < {TARGET_S:.0f} s) {time_verdict}")
     print(f"report peak RSS: {report_mb:.0f} MB (target < {TARGET_MB:.0f} MB) {rss_verdict}")
+    if arguments.against:
+        print(
+            f"the same report by {arguments.against}: {other_s:.1f} s, peak RSS {other_mb:.0f} MB; "
+            f"this one takes {report_s / other_s:.2f} of its time"
+        )
     print(
         f"baseline, the trials export of the same sessions: {export_s:.1f} s; "
         f"report / baseline = {report_s / export_s:.2f}"

@@ -164,7 +164,7 @@ def _distribution(
     spread_axes.set_ylabel("children (%)")
     summary_axes.set_yticks(range(len(levels)), levels)
     summary_axes.set_ylim(len(levels) - 0.5, -0.5)
-    summary_axes.set_xlim(0, 100)
+    summary_axes.set_xlim(0, 104)  # a median of 100 % is not cut in half by the edge
     summary_axes.set_xlabel("median child (%), bar: quartiles")
     figure.legend(handles=handles, title=title, loc="outside lower center", ncols=2)
     figure.suptitle(

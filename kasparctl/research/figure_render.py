@@ -99,7 +99,11 @@ def render(figure: Any) -> Rendered:
             del renderer.draw_text
     # The layout is made: the vector files keep it rather than make it again (constrained
     # layout measures every text, half of each file's time), so all three files agree.
-    figure.set_layout_engine("none")
+    # None, not "none": savefig makes an extra draw for any layout engine, even "none"'s.
+    with matplotlib.rc_context(
+        {"figure.autolayout": False, "figure.constrained_layout.use": False}
+    ):
+        figure.set_layout_engine(None)
     rendered = Rendered(figure)
     for text in dict.fromkeys(shown):
         if not text.get_visible() or not text.get_text().strip():

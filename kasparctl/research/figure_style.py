@@ -2,7 +2,8 @@
 
 Okabe and Ito's colour-blind-safe palette, and every series also has its own marker
 and line style, so no two series (and no green against red answer) differ by hue
-alone: a figure printed in grey still tells them apart. A figure never exceeds a
+alone: a figure printed in grey still tells them apart. The phrase bands (once shaded
+green to red, by hue alone) are shaded in greys and named beside the axes. A figure never exceeds a
 journal page (PAGE_WIDTH x PAGE_HEIGHT inches); more conditions, children or
 contrasts than fit become small multiples over several pages, or are aggregated.
 """
@@ -26,9 +27,6 @@ OKABE_ITO = (
 )
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 LINESTYLES = ("-", "--", "-.", ":")
-# Answers that agree with the answer key and those that do not: colour, marker and hatch.
-RIGHT = ("#0072B2", "o", "")
-WRONG = ("#D55E00", "X", "////")
 
 # A journal page's text block, in inches: no figure is larger.
 PAGE_WIDTH = 7.5
