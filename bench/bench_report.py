@@ -198,6 +198,8 @@ def run(argv: list[str], code: Path | None = None) -> tuple[float, float]:
         text=True,
         check=False,
         env=environment,
+        # Not in this checkout: `python -c` puts the working directory first on sys.path.
+        cwd=tempfile.gettempdir(),
     )
     elapsed = time.perf_counter() - started
     if done.returncode != 0:
