@@ -1,0 +1,132 @@
+"""A forest plot of every contrast's Hedges' g, grouped by measure, a page at most per 124.
+
+A contrast with an interval is a filled point and its whisker (a diamond when it
+survives Holm's correction over the report); one without (fewer than MIN_CLUSTERS
+clusters a side) is a hollow circle and says "no interval": it must not look
+precise. Each row names its clusters a side. Past ROWS_PER_PANEL rows the rows
+continue in a second panel, then on another page.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from kasparctl.research.figure_style import PAGE_WIDTH, SMALL, chunks, new_figure, short
+from kasparctl.research.inference import MEASURES, MIN_CLUSTERS, Contrast
+
+ROWS_PER_PANEL = 62
+PANELS_PER_PAGE = 2
+LABEL_WIDTH = 50
+
+LABELS = {m.name: m.label for m in MEASURES}
+LABELS.update(
+    false_green_rate="False greens, of wrong guesses",
+    false_red_rate="False reds, of right guesses",
+    reaction_time_mean="Reaction time, mean",
+    prompts_per_answer="Prompts per answer",
+    extra_presses_per_answer="Extra presses per answer",
+    undos_per_answer="Undos per answer",
+)
+
+Row = tuple[str, Contrast | None]
+
+
+def row_label(contrast: Contrast) -> str:
+    """`A - B (variant) ka/kb`, the shared variant said once."""
+    a, b = contrast.a, contrast.b
+    tail = _variant(a)
+    if tail and tail == _variant(b):
+        a, b = a.removesuffix(tail).rstrip(), b.removesuffix(tail).rstrip()
+        tail = " " + tail
+    else:
+        tail = ""
+    attribute = contrast.factor.startswith("participant ")
+    prefix = contrast.factor.removeprefix("participant ") + " " if attribute else ""
+    counts = f" {contrast.clusters_a}/{contrast.clusters_b}"
+    return short(f"{prefix}{a} - {b}{tail}", LABEL_WIDTH - len(counts)) + counts
+
+
+def _variant(label: str) -> str:
+    return label[label.rindex("(") :] if label.endswith(")") and "(" in label else ""
+
+
+def rows_of(found: Sequence[Contrast]) -> list[Row]:
+    """A header row per measure, then its contrasts (in the report's order)."""
+    by_measure: dict[str, list[Contrast]] = {}
+    for contrast in found:
+        by_measure.setdefault(contrast.measure, []).append(contrast)
+    rows: list[Row] = []
+    for measure, mine in by_measure.items():
+        rows.append((LABELS.get(measure, measure), None))
+        rows += [(row_label(c), c) for c in mine]
+    return rows
+
+
+def contrasts(found: Sequence[Contrast]) -> tuple[list[Any] | None, str]:
+    """The forest plot's pages (None and why when no contrast has an effect size)."""
+    shown = [c for c in found if c.hedges_g.value is not None]
+    if not shown:
+        return None, (
+            "no contrast with an effect size (it needs two conditions that differ in one "
+            "factor, or two levels of a participant attribute, each with at least two clusters)"
+        )
+    panels = chunks(rows_of(shown), ROWS_PER_PANEL)
+    pages = chunks(panels, PANELS_PER_PAGE)
+    return [_page(page, number, len(pages)) for number, page in enumerate(pages, 1)], ""
+
+
+def _page(panels: list[list[Row]], number: int, count: int) -> Any:
+    from matplotlib.lines import Line2D
+
+    most = max(len(rows) for rows in panels)
+    figure = new_figure(PAGE_WIDTH if len(panels) > 1 else 5.0, 1.4 + 0.128 * most)
+    grid = figure.subplots(1, len(panels), squeeze=False).ravel()
+    for axes, rows in zip(grid, panels, strict=True):
+        _panel(axes, rows)
+    handles = [
+        Line2D([], [], color="0.1", marker="o", label="Hedges' g, 95 % interval"),
+        Line2D([], [], color="0.1", marker="D", label="Holm-adjusted p < 0.05"),
+        Line2D(
+            [],
+            [],
+            color="0.1",
+            marker="o",
+            markerfacecolor="white",
+            linestyle="none",
+            label=f"no interval: fewer than {MIN_CLUSTERS} clusters a side",
+        ),
+    ]
+    figure.legend(
+        handles=handles,
+        loc="outside lower center",
+        ncols=3,
+        title="A - B, clusters a side after each row",
+    )
+    suffix = f" (page {number} of {count})" if count > 1 else ""
+    figure.suptitle("Contrasts: effect sizes (Hedges' g, A - B)" + suffix)
+    return figure
+
+
+def _panel(axes: Any, rows: list[Row]) -> None:
+    labels = []
+    for row, (label, contrast) in enumerate(rows):
+        labels.append(label)
+        if contrast is None:
+            continue
+        g = contrast.hedges_g
+        assert g.value is not None
+        if g.low is None or g.high is None:
+            axes.plot([g.value], [row], "o", color="0.1", markerfacecolor="white", markersize=3)
+            continue
+        axes.plot([g.low, g.high], [row, row], color="0.1", linewidth=0.9)
+        marker = "D" if contrast.significant else "o"
+        axes.plot([g.value], [row], marker, color="0.1", markersize=3)
+    axes.axvline(0, color="0.5", linewidth=0.7, linestyle="--")
+    axes.set_yticks(range(len(rows)), labels)
+    for tick, (_, contrast) in zip(axes.get_yticklabels(), rows, strict=True):
+        if contrast is None:
+            tick.set_fontweight("bold")
+    axes.tick_params(axis="y", length=0, labelsize=SMALL - 1)
+    axes.set_ylim(len(rows) - 0.5, -0.5)
+    axes.set_xlabel("Hedges' g (clusters' own values)")
