@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import random
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -62,6 +63,9 @@ BLINK_LAYER = "blink"
 MOUTH_LAYER = "mouth"
 GESTURE_LAYER = "gesture"
 HOME_LAYER = "home"
+# The longest the loop sleeps through ticks that change no servo's count before it
+# looks ahead again (a lookahead costs a tick's arithmetic, no packet and no wake-up).
+MAX_STILL_S = 10.0
 
 
 @dataclass(eq=False)
@@ -75,9 +79,42 @@ class _Playback:
     started: float | None = None
     base: dict[str, float] = field(default_factory=dict)
 
+    # The whole trajectory, planned at its first tick: each joint's offset at every tick
+    # of the loop from there. A tick on the loop's schedule reads it; a late one (the
+    # robot's loop, a few ms) evaluates the curve at its own moment.
+    plan: list[dict[str, float]] = field(default_factory=list)
+    period: float = 0.0
+
+    def begin(self, now: float, base: dict[str, float], period: float) -> None:
+        """Its first tick: offsets from `base`, every tick's planned at once."""
+        self.started = now
+        self.base = base
+        self.period = period
+        ticks = math.ceil(self.behaviour.duration / period - 1e-9) + 1
+        self.plan = [self.behaviour.offsets(k * period, self.strength) for k in range(ticks)]
+
+    def offsets(self, now: float) -> dict[str, float]:
+        """Each joint's offset at `now` (planned when `now` is one of the loop's ticks)."""
+        assert self.started is not None
+        elapsed = now - self.started
+        index = round(elapsed / self.period)
+        if index < len(self.plan) and abs(index * self.period - elapsed) < 1e-6:
+            return self.plan[index]
+        return self.behaviour.offsets(elapsed, self.strength)
+
+    @property
+    def ends(self) -> float:
+        """When its last tick is due (its first must have come)."""
+        assert self.started is not None
+        return self.started + self.behaviour.duration
+
     def finish(self) -> None:
         if self.done is not None and not self.done.done():
             self.done.set_result(None)
+
+
+class _Unplanned(Exception):
+    """The moment ahead cannot be foreseen: a layer begins or pulls home at the next tick."""
 
 
 @dataclass
@@ -102,12 +139,16 @@ class LiveBody:
         *,
         latency_s: float = 0.0,
         rng: random.Random | None = None,
+        skipping: bool = True,
     ) -> None:
         """The body of `servos` as `settings` say, playing behaviours of `library`.
 
         `latency_s` is the player's output latency (the mouth waits as long);
         `rng` draws the blink and idle intervals. Nothing moves until start().
+        `skipping`: the loop sleeps through the ticks at which no servo's count would
+        change (False: it wakes at every tick, as it used to; the goals sent are the same).
         """
+        self.skipping = skipping
         self._servos = servos
         self._settings = settings
         # Virtual joints (eyes_yaw, eyelids) played as the real joints they drive.
@@ -245,10 +286,11 @@ class LiveBody:
     async def _run(self) -> None:
         begin = self._clock.now()
         tick = 0
+        period = self.period
         while True:
             tick += 1
-            due = begin + tick * self.period
-            if due - self._clock.now() < -self.period:  # far behind: start again, no burst
+            due = begin + tick * period
+            if due - self._clock.now() < -period:  # far behind: start again, no burst
                 begin, tick = self._clock.now(), 0
                 due = begin
             await self._alarm.sleep_until(due)
@@ -256,12 +298,71 @@ class LiveBody:
             if self.lateness is not None:
                 self.lateness.append(now - due)
             sent = await self.step(now)
-            if not sent and self.quiet():
+            # A resting loop knows the next tick would send nothing once no layer is left:
+            # it rests now, as the ticking loop does one tick later (either wakes then at
+            # the same moment, the next life or a poke, and ticks from there).
+            if (not sent or self.skipping) and self.quiet():
                 # Nothing moves: no goal to send until a layer has something to do. The
                 # joints layer holds every goal meanwhile; waking costs nothing on the
                 # robot and keeps whole games in simulated time as fast as without a body.
                 await self._rest_until(self._next_life())
                 begin, tick = self._clock.now(), 0
+                continue
+            still = self.still_ticks(due) if self.skipping else 0
+            if still:
+                # The ticks ahead would send no servo a new count: sleep through them
+                # (a poke wakes the loop for the next tick), then wake on the schedule.
+                await self._rest_until(due + still * period)
+                if self._wake.is_set():
+                    tick = math.floor((self._clock.now() - begin) / period + 1e-9)
+                else:
+                    tick += still
+
+    def still_ticks(self, due: float) -> int:
+        """How many ticks after the one `due` would send no servo a new count: the layers'
+        trajectories looked at ahead, up to the next moment a layer begins or ends."""
+        if HOME_LAYER in self.layers.values():
+            return 0
+        period = self.period
+        try:
+            horizon = self._horizon()
+            held = self._servos.commanded()
+            limit = max(1, round(MAX_STILL_S / period))
+            for ahead in range(1, limit + 1):
+                moment = due + ahead * period
+                if moment >= horizon - 1e-9:
+                    return ahead - 1
+                pose = self._blend(moment, held, self._home, {}, live=False)
+                if pose and self._servos.moves_servo(pose):
+                    return ahead - 1
+            return limit
+        except _Unplanned:
+            return 0
+
+    def _horizon(self) -> float:
+        """The next moment a layer begins or ends (a tick at or after it is never slept
+        through); _Unplanned when one begins at the next tick."""
+        moments = [math.inf]
+        if self._blinking:
+            if self._next_blink is None or (self._alive and self._next_idle is None):
+                raise _Unplanned
+            moments.append(self._next_blink)
+            if self._alive and self._next_idle is not None:
+                moments.append(self._next_idle)
+        for playback in (self._idle, self._blink, self._gesture):
+            if playback is not None:
+                if playback.started is None:
+                    raise _Unplanned
+                moments.append(playback.ends)
+        move = self._gaze
+        if move is not None and not move.settled:
+            if move.began is None:
+                raise _Unplanned
+            moments.append(move.began + GAZE_MOVE_S)
+        until = self.mouth.until
+        if until is not None:
+            moments.append(until)
+        return min(moments)
 
     def quiet(self) -> bool:
         """Whether no layer has anything to send (blinks and idle may still be scheduled)."""
@@ -319,29 +420,50 @@ class LiveBody:
         """The blended target of every claimed joint at `now` (layers by priority)."""
         held = self._servos.commanded()
         self._learn_home(held)
-        home = self._home
-        out: dict[str, float] = {}
         layers = self.layers
         layers.clear()
-        self._gaze_layer(now, held, out)
+        return self._blend(now, held, self._home, layers, live=True)
+
+    def _blend(
+        self,
+        now: float,
+        held: Mapping[str, float],
+        home: Mapping[str, float],
+        layers: dict[str, str],
+        *,
+        live: bool,
+    ) -> dict[str, float]:
+        """The layers at `now`. Live, a tick: layers begin, end and settle. Not live, a
+        look ahead that changes nothing (_Unplanned where a layer would begin)."""
+        out: dict[str, float] = {}
+        self._gaze_layer(now, held, out, layers, live)
         if self._blinking:
-            self._schedule_life(now)
+            if live:
+                self._schedule_life(now)
             if self._idle is not None:
-                self._idle = self._additive(self._idle, now, home, out)
+                idle = self._additive(self._idle, now, home, out, layers, live)
+                if live:
+                    self._idle = idle
             if self._blink is not None:
-                self._blink = self._relative(self._blink, now, home, out)
+                blink = self._relative(self._blink, now, home, out, layers, live)
+                if live:
+                    self._blink = blink
         if self._mouth_joint is not None and self._mouth_joint in held:
-            opening = self.mouth.opening(now)
+            opening = self.mouth.opening(now) if live else self.mouth.peek(now)
             if opening is not None:
                 span = self._settings.mouth_open_deg
                 out[self._mouth_joint] = self._mouth_closed + opening * span
                 layers[self._mouth_joint] = MOUTH_LAYER
         if self._gesture is not None:
-            self._gesture = self._relative(self._gesture, now, home, out)
+            gesture = self._relative(self._gesture, now, home, out, layers, live)
+            if live:
+                self._gesture = gesture
         for joint, rest in home.items():
             # A joint a behaviour left away from home (cut short) goes back to it gently.
             now_at = held.get(joint)
             if now_at is not None and joint not in out and abs(now_at - rest) > HOME_EPSILON_DEG:
+                if not live:
+                    raise _Unplanned
                 out[joint] = now_at + (rest - now_at) * HOME_PULL
                 layers[joint] = HOME_LAYER
         return {
@@ -383,11 +505,7 @@ class LiveBody:
 
     def _schedule_life(self, now: float) -> None:
         settings = self._settings
-        if self._next_blink is None:
-            self._next_blink = now + self._rng.uniform(*settings.blink_interval_s)
-        if self._next_idle is None and self._alive:
-            self._next_idle = now + self._rng.uniform(*settings.idle_interval_s)
-        if now >= self._next_blink:
+        if self._next_blink is not None and now >= self._next_blink:
             self._next_blink = None
             if self._blink is None and BLINK in self._library:
                 self._blink = _Playback(self._library[BLINK], 1.0, BLINK_LAYER)
@@ -395,12 +513,26 @@ class LiveBody:
             self._next_idle = None
             if self._idle is None and IDLE in self._library and settings.idle_amplitude > 0:
                 self._idle = _Playback(self._library[IDLE], settings.idle_amplitude, IDLE_LAYER)
+        # The next ones drawn at once: the loop knows when to wake for them.
+        if self._next_blink is None:
+            self._next_blink = now + self._rng.uniform(*settings.blink_interval_s)
+        if self._next_idle is None and self._alive:
+            self._next_idle = now + self._rng.uniform(*settings.idle_interval_s)
 
-    def _gaze_layer(self, now: float, held: Mapping[str, float], out: dict[str, float]) -> None:
+    def _gaze_layer(
+        self,
+        now: float,
+        held: Mapping[str, float],
+        out: dict[str, float],
+        layers: dict[str, str],
+        live: bool,
+    ) -> None:
         move = self._gaze
         if move is None:
             return
         if move.began is None:
+            if not live:
+                raise _Unplanned
             move.began = now
             move.start = {j: held[j] for j in move.target if j in held}
         if move.settled:
@@ -410,43 +542,64 @@ class LiveBody:
             start = move.start.get(joint)
             if start is not None:
                 out[joint] = start + (target - start) * fraction
-                self.layers[joint] = GAZE_LAYER
-        move.settled = now - move.began >= GAZE_MOVE_S
-        if move.settled:
-            self._home.update({j: v for j, v in move.target.items() if j in move.start})
+                layers[joint] = GAZE_LAYER
+        if live:
+            move.settled = now - move.began >= GAZE_MOVE_S
+            if move.settled:
+                self._home.update({j: v for j, v in move.target.items() if j in move.start})
 
     def _additive(
-        self, playback: _Playback, now: float, held: Mapping[str, float], out: dict[str, float]
+        self,
+        playback: _Playback,
+        now: float,
+        held: Mapping[str, float],
+        out: dict[str, float],
+        layers: dict[str, str],
+        live: bool,
     ) -> _Playback | None:
         """Offsets added to what the layers below want (else to where the joint was)."""
         if playback.started is None:
-            playback.started = now
-            playback.base = {j: held[j] for j in playback.behaviour.joints if j in held}
-        elapsed = now - playback.started
-        for joint, offset in playback.behaviour.offsets(elapsed, playback.strength).items():
-            if joint in playback.base:
-                out[joint] = out.get(joint, playback.base[joint]) + offset
-                self.layers[joint] = playback.layer
-        if elapsed >= playback.behaviour.duration:
-            playback.finish()
-            return None
-        return playback
+            if not live:
+                raise _Unplanned
+            playback.begin(
+                now, {j: held[j] for j in playback.behaviour.joints if j in held}, self.period)
+        base = playback.base
+        for joint, offset in playback.offsets(now).items():
+            if joint in base:
+                out[joint] = out.get(joint, base[joint]) + offset
+                layers[joint] = playback.layer
+        return self._ended(playback, now, live)
 
     def _relative(
-        self, playback: _Playback, now: float, held: Mapping[str, float], out: dict[str, float]
+        self,
+        playback: _Playback,
+        now: float,
+        held: Mapping[str, float],
+        out: dict[str, float],
+        layers: dict[str, str],
+        live: bool,
     ) -> _Playback | None:
         """Offsets from where each joint was (or was wanted) at the first tick; overrides."""
         if playback.started is None:
-            playback.started = now
-            playback.base = {
-                j: out.get(j, held[j]) for j in playback.behaviour.joints if j in held
-            }
-        elapsed = now - playback.started
-        for joint, offset in playback.behaviour.offsets(elapsed, playback.strength).items():
-            if joint in playback.base:
-                out[joint] = playback.base[joint] + offset
-                self.layers[joint] = playback.layer
-        if elapsed >= playback.behaviour.duration:
+            if not live:
+                raise _Unplanned
+            playback.begin(
+                now,
+                {j: out.get(j, held[j]) for j in playback.behaviour.joints if j in held},
+                self.period,
+            )
+        base = playback.base
+        for joint, offset in playback.offsets(now).items():
+            if joint in base:
+                out[joint] = base[joint] + offset
+                layers[joint] = playback.layer
+        return self._ended(playback, now, live)
+
+    @staticmethod
+    def _ended(playback: _Playback, now: float, live: bool) -> _Playback | None:
+        """The playback, or None at its last tick (a live one is finished there)."""
+        assert playback.started is not None
+        if live and now - playback.started >= playback.behaviour.duration:
             playback.finish()
             return None
         return playback
