@@ -44,7 +44,7 @@ def raw_writes(servos: SimServos) -> Writes:
     for bus, driver in servos.drivers.items():
         for write in driver.writes:
             for servo_id, raw in write.goals.items():
-                rows.append((write.time, BY_ID[(bus, servo_id)].name, raw))
+                rows.append((round(write.time, 6), BY_ID[(bus, servo_id)].name, raw))
     return sorted(rows)
 
 

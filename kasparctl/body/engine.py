@@ -34,7 +34,6 @@ import math
 import random
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
 import structlog
 
@@ -168,7 +167,8 @@ class LiveBody:
         self.mouth = Mouth(clock, latency_s, settings.mouth_full_level, self.period)
         # A line's sound wakes a quiet loop at once (the mouth must not wait for a poll).
         self.mouth.on_news = self._poke
-        self._wake = asyncio.Event()
+        # Set while the loop rests or sleeps through still ticks: a poke ends that wait.
+        self._resting = False
         self._alive = False
         self._blinking = False  # blinks on in a body otherwise still (pointing)
         self._gesture: _Playback | None = None
@@ -188,6 +188,10 @@ class LiveBody:
         self._home: dict[str, float] = {}
         # What the body itself last sent, to tell its own goals from the game's moves.
         self._sent: dict[str, float] = {}
+        # The joints that may be away from home: those the body moved (or whose home a
+        # gaze changed) since each was last seen there. Only these are looked at for the
+        # way home, not every joint at every tick.
+        self._unsettled: set[str] = set()
         # The layer that won each joint at the last compose (the goals' sources).
         self.layers: dict[str, str] = {}
         # Set to a list to collect each tick's lateness in seconds (bench/bench_body_loop.py).
@@ -280,6 +284,7 @@ class LiveBody:
         # Every joint is home where it stands: not even the way home is sent after a cancel.
         self._home.clear()
         self._sent.clear()
+        self._unsettled.clear()
 
     # --- the loop -----------------------------------------------------------------------
 
@@ -287,13 +292,16 @@ class LiveBody:
         begin = self._clock.now()
         tick = 0
         period = self.period
+        arrived = False  # woken at this tick's moment already (the end of a still stretch)
         while True:
             tick += 1
             due = begin + tick * period
             if due - self._clock.now() < -period:  # far behind: start again, no burst
                 begin, tick = self._clock.now(), 0
                 due = begin
-            await self._alarm.sleep_until(due)
+            if not arrived:
+                await self._alarm.sleep_until(due)
+            arrived = False
             now = self._clock.now()
             if self.lateness is not None:
                 self.lateness.append(now - due)
@@ -310,13 +318,14 @@ class LiveBody:
                 continue
             still = self.still_ticks(due) if self.skipping else 0
             if still:
-                # The ticks ahead would send no servo a new count: sleep through them
-                # (a poke wakes the loop for the next tick), then wake on the schedule.
-                await self._rest_until(due + still * period)
-                if self._wake.is_set():
+                # The ticks ahead would send no servo a new count: sleep through them to
+                # the next that does, on the schedule; a poke wakes the loop for the tick
+                # after it.
+                if await self._rest_until(due + (still + 1) * period):
                     tick = math.floor((self._clock.now() - begin) / period + 1e-9)
                 else:
                     tick += still
+                    arrived = True
 
     def still_ticks(self, due: float) -> int:
         """How many ticks after the one `due` would send no servo a new count: the layers'
@@ -327,6 +336,8 @@ class LiveBody:
         try:
             horizon = self._horizon()
             held = self._servos.commanded()
+            if self._pulled_home(held):
+                return 0
             limit = max(1, round(MAX_STILL_S / period))
             for ahead in range(1, limit + 1):
                 moment = due + ahead * period
@@ -338,6 +349,23 @@ class LiveBody:
             return limit
         except _Unplanned:
             return 0
+
+    def _pulled_home(self, held: Mapping[str, float]) -> bool:
+        """Whether a joint away from home is left to the home layer by every other layer."""
+        claimed: set[str] = set()
+        for playback in (self._idle, self._blink, self._gesture):
+            if playback is not None:
+                claimed.update(playback.base)
+        if self._gaze is not None and not self._gaze.settled:
+            claimed.update(self._gaze.start)
+        if self._mouth_joint is not None and self.mouth.claimed:
+            claimed.add(self._mouth_joint)
+        home = self._home
+        return any(
+            joint not in claimed and abs(held[joint] - home[joint]) > HOME_EPSILON_DEG
+            for joint in self._unsettled
+            if joint in held and joint in home
+        )
 
     def _horizon(self) -> float:
         """The next moment a layer begins or ends (a tick at or after it is never slept
@@ -382,22 +410,18 @@ class LiveBody:
         due = [moment for moment, allowed_now in allowed if moment is not None and allowed_now]
         return min(due) if due else None
 
-    async def _rest_until(self, moment: float | None) -> None:
-        """Wait for a poke (a behaviour, a gaze, alive again, a line's sound) or `moment`."""
-        self._wake.clear()
-        waits: list[asyncio.Future[Any]] = [asyncio.ensure_future(self._wake.wait())]
-        if moment is not None:
-            delay = max(0.0, moment - self._clock.now())
-            waits.append(asyncio.ensure_future(self._clock.sleep(delay)))
+    async def _rest_until(self, moment: float | None) -> bool:
+        """Wait for a poke (a behaviour, a gaze, alive again, a line's sound) or `moment`
+        (None: a poke only); whether a poke came."""
+        self._resting = True
         try:
-            await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+            return await self._alarm.sleep_until(moment)
         finally:
-            for waiting in waits:
-                waiting.cancel()
-            await asyncio.gather(*waits, return_exceptions=True)
+            self._resting = False
 
     def _poke(self) -> None:
-        self._wake.set()
+        if self._resting:
+            self._alarm.interrupt()
 
     async def step(self, now: float) -> dict[str, float]:
         """One tick: blend the layers for `now` and send the goals; the goals sent."""
@@ -414,6 +438,7 @@ class LiveBody:
             return {}
         self._fault_seen = False
         self._sent.update(sent)
+        self._unsettled.update(sent)
         return sent
 
     def compose(self, now: float) -> dict[str, float]:
@@ -458,14 +483,19 @@ class LiveBody:
             gesture = self._relative(self._gesture, now, home, out, layers, live)
             if live:
                 self._gesture = gesture
-        for joint, rest in home.items():
+        if live:
             # A joint a behaviour left away from home (cut short) goes back to it gently.
-            now_at = held.get(joint)
-            if now_at is not None and joint not in out and abs(now_at - rest) > HOME_EPSILON_DEG:
-                if not live:
-                    raise _Unplanned
-                out[joint] = now_at + (rest - now_at) * HOME_PULL
-                layers[joint] = HOME_LAYER
+            # (A look ahead has asked _pulled_home once: held does not change meanwhile.)
+            for joint in list(self._unsettled):
+                if joint in out:
+                    continue
+                now_at, rest = held.get(joint), home.get(joint)
+                if now_at is not None and rest is not None and abs(now_at - rest) > (
+                        HOME_EPSILON_DEG):
+                    out[joint] = now_at + (rest - now_at) * HOME_PULL
+                    layers[joint] = HOME_LAYER
+                else:
+                    self._unsettled.discard(joint)  # home: nothing to look at until it moves
         return {
             joint: self._within(joint, value) for joint, value in out.items() if joint in held
         }
@@ -476,7 +506,8 @@ class LiveBody:
 
     def _learn_home(self, held: Mapping[str, float]) -> None:
         """A joint not where the body last sent it was moved by someone else: its new home."""
-        for joint, value in held.items():
+        # Most ticks every joint is exactly where the body left it: compare in one go.
+        for joint, value in held.items() - self._sent.items():
             sent = self._sent.get(joint)
             if sent is None or abs(value - sent) > HOME_EPSILON_DEG:
                 self._home[joint] = value
@@ -497,10 +528,11 @@ class LiveBody:
     def away_from_home(self) -> bool:
         """Whether a joint still has its way home to go."""
         held = self._servos.commanded()
+        home = self._home
         return any(
-            abs(held[joint] - rest) > HOME_EPSILON_DEG
-            for joint, rest in self._home.items()
-            if joint in held
+            abs(held[joint] - home[joint]) > HOME_EPSILON_DEG
+            for joint in self._unsettled
+            if joint in held and joint in home
         )
 
     def _schedule_life(self, now: float) -> None:
@@ -546,7 +578,9 @@ class LiveBody:
         if live:
             move.settled = now - move.began >= GAZE_MOVE_S
             if move.settled:
-                self._home.update({j: v for j, v in move.target.items() if j in move.start})
+                settled = {j: v for j, v in move.target.items() if j in move.start}
+                self._home.update(settled)
+                self._unsettled.update(settled)
 
     def _additive(
         self,
