@@ -31,7 +31,7 @@ import asyncio
 import contextlib
 import math
 from collections.abc import Awaitable, Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TypeVar
 
 import structlog
@@ -59,7 +59,7 @@ from hal.servos.api import (
     ServoDriver,
 )
 from hal.servos.claims import JointClaims
-from hal.servos.settings import JointSettings, ServoSettings
+from hal.servos.settings import JointSettings, ServoModel, ServoSettings
 
 log = structlog.get_logger("hal.servos.joints")
 
@@ -107,31 +107,35 @@ class _Joint:
     # The raw goal the servo was last sent while its torque is on (None: unknown or limp):
     # a stream goal that rounds to it changes nothing the servo does and is not sent.
     written: int | None = None
+    name: str = field(init=False)
+    servo_id: int = field(init=False)
+    _model: ServoModel = field(init=False, repr=False)
+    _low: float = field(init=False, repr=False)
+    _high: float = field(init=False, repr=False)
+    _direction: int = field(init=False, repr=False)
+    _offset: float = field(init=False, repr=False)
 
-    @property
-    def name(self) -> str:
-        return self.settings.name
-
-    @property
-    def servo_id(self) -> int:
-        return self.settings.id
+    def __post_init__(self) -> None:
+        # Read at every goal the body streams: the settings' values, looked up once.
+        s = self.settings
+        self.name = s.name
+        self.servo_id = s.id
+        self._model = s.servo
+        self._low, self._high = s.range_deg
+        self._direction, self._offset = s.direction, s.offset_deg
 
     def clamp(self, degrees: float) -> float:
-        low, high = self.settings.range_deg
-        return min(high, max(low, degrees))
+        return min(self._high, max(self._low, degrees))
 
     def to_raw(self, degrees: float) -> int:
-        s = self.settings
-        return s.servo.to_raw(self.clamp(degrees), s.direction, s.offset_deg)
+        return self._model.to_raw(self.clamp(degrees), self._direction, self._offset)
 
     def to_raw_unclamped(self, degrees: float) -> int:
         """Raw goal without the range clamp: only for a joint being brought into range."""
-        s = self.settings
-        return s.servo.to_raw(degrees, s.direction, s.offset_deg)
+        return self._model.to_raw(degrees, self._direction, self._offset)
 
     def to_degrees(self, raw: int) -> float:
-        s = self.settings
-        return s.servo.to_degrees(raw, s.direction, s.offset_deg)
+        return self._model.to_degrees(raw, self._direction, self._offset)
 
 
 class Joints:

@@ -506,9 +506,11 @@ class LiveBody:
 
     def _learn_home(self, held: Mapping[str, float]) -> None:
         """A joint not where the body last sent it was moved by someone else: its new home."""
-        # Most ticks every joint is exactly where the body left it: compare in one go.
-        for joint, value in held.items() - self._sent.items():
-            sent = self._sent.get(joint)
+        last = self._sent
+        for joint, value in held.items():
+            sent = last.get(joint)
+            if sent == value:
+                continue  # where the body left it: most joints, most ticks
             if sent is None or abs(value - sent) > HOME_EPSILON_DEG:
                 self._home[joint] = value
                 self._sent[joint] = value
