@@ -316,7 +316,11 @@ class LiveBody:
                 await self._rest_until(self._next_life())
                 begin, tick = self._clock.now(), 0
                 continue
-            still = self.still_ticks(due) if self.skipping else 0
+            # While a line is heard the mouth changes its count at nearly every tick: no
+            # look ahead then (it would find the very next tick), only in its pauses.
+            speaking = self.layers.get(self._mouth_joint or "") == MOUTH_LAYER and bool(
+                self.mouth.peek(now))
+            still = self.still_ticks(due) if self.skipping and not speaking else 0
             if still:
                 # The ticks ahead would send no servo a new count: sleep through them to
                 # the next that does, on the schedule; a poke wakes the loop for the tick
