@@ -101,6 +101,29 @@ async def test_a_limp_joint_gets_its_goal_again_when_torque_comes_back():
     assert [joint for _, joint, _ in raw_writes(servos)] == ["head_pitch"]
 
 
+async def test_still_band_is_the_targets_that_round_to_the_count_sent():
+    clock = FakeClock()
+    servos = await powered(clock)
+    joint = JOINTS["head_yaw"]
+    start = servos.commanded()["head_yaw"]
+    clock.t += PERIOD
+    await servos.stream({"head_yaw": start + 1.0}, PERIOD)
+    low, high = servos.still_band("head_yaw")
+    assert high - low == pytest.approx(joint.servo.degrees_per_unit, abs=1e-4)
+    sent = joint.servo.to_raw(start + 1.0, 1, 0.0)
+    for degrees in (low + 1e-6, high - 1e-6):
+        assert joint.servo.to_raw(degrees, 1, 0.0) == sent
+        assert not servos.moves_servo({"head_yaw": degrees})
+    for degrees in (low - 0.01, high + 0.01):
+        assert servos.moves_servo({"head_yaw": degrees})
+    # A limp joint takes no stream goal: any target sends nothing.
+    await servos.set_compliant("head", True)
+    assert servos.still_band("head_yaw") == (float("-inf"), float("inf"))
+    # A virtual joint's band is not known: empty, so a caller never sleeps on it.
+    low, high = servos.still_band("eyelids")
+    assert low > high
+
+
 # --- the loop sleeps through ticks that change nothing -------------------------------------
 
 

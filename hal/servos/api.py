@@ -234,6 +234,12 @@ class ServoApi(Protocol):
         """
         ...
 
+    def still_band(self, joint: str) -> tuple[float, float]:
+        """The targets (low, high degrees) for which stream() would send `joint` nothing now:
+        within its servo's last count, or anything while it takes no stream goal (claimed,
+        limp); empty (low > high) when unsure. Nothing is sent."""
+        ...
+
     async def set_compliant(self, group: str, compliant: bool) -> None:
         """Torque off (a child can move the arm by hand) or back on, holding where it is.
 

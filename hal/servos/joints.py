@@ -401,6 +401,29 @@ class Joints:
                     return True
         return False
 
+    def still_band(self, joint: str) -> tuple[float, float]:
+        """The targets (low, high degrees) for which stream() would send `joint` nothing now:
+        within its servo's last count (and its range), anything while it takes no stream goal
+        (claimed, limp); empty (low > high) when unsure (a coupled robot, a virtual or unknown
+        joint, a count not yet sent)."""
+        found = self._joints.get(joint)
+        if found is None or self.settings.couplings:
+            return math.inf, -math.inf
+        if joint in self._claims.held() or found.torque is not True or found.commanded is None:
+            return -math.inf, math.inf
+        if found.written is None:
+            return math.inf, -math.inf
+        model = found._model
+        # Degrees that round to the count sent: centre + direction (d - offset) / unit
+        # within half a count of it, a hair inside so a tie never counts as the same.
+        half = 0.5 - 1e-6
+        ends = [
+            found._offset + found._direction * model.degrees_per_unit * (
+                found.written + side * half - model.raw_centre)
+            for side in (-1, 1)
+        ]
+        return max(min(ends), found._low), min(max(ends), found._high)
+
     def _realise(self, pose: Pose) -> dict[str, float]:
         """`pose` as the real joints' goals (virtual joints expanded, followers moved)."""
         virtual = self._virtual

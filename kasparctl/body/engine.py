@@ -343,6 +343,9 @@ class LiveBody:
             if self._pulled_home(held):
                 return 0
             limit = max(1, round(MAX_STILL_S / period))
+            life = self._life_still_ticks(due, horizon, limit)
+            if life is not None:
+                return life
             for ahead in range(1, limit + 1):
                 moment = due + ahead * period
                 if moment >= horizon - 1e-9:
@@ -353,6 +356,41 @@ class LiveBody:
             return limit
         except _Unplanned:
             return 0
+
+    def _life_still_ticks(self, due: float, horizon: float, limit: int) -> int | None:
+        """still_ticks when only blinks and idle movements play: each joint's planned
+        trajectory read against the targets its servo would not be sent (still_band),
+        without composing a pose a tick; None when other layers play too."""
+        if (self._gesture is not None or self.mouth.until is not None
+                or (self._gaze is not None and not self._gaze.settled)):
+            return None
+        tracks: dict[str, _Playback] = {}
+        for playback in (self._idle, self._blink):  # the blink above the idle
+            if playback is not None:
+                if playback.started is None:
+                    raise _Unplanned
+                tracks.update(dict.fromkeys(playback.base, playback))
+        period = self.period
+        still = limit
+        for ahead in range(1, limit + 1):
+            if due + ahead * period >= horizon - 1e-9:
+                still = ahead - 1
+                break
+        for joint, playback in tracks.items():
+            low, high = self._servos.still_band(joint)
+            base = playback.base[joint]
+            assert playback.started is not None
+            first = round((due - playback.started) / period)
+            plan = playback.plan
+            for ahead in range(1, still + 1):
+                index = first + ahead
+                if index >= len(plan):
+                    break  # its end is the horizon
+                value = self._within(joint, base + plan[index].get(joint, 0.0))
+                if not low <= value <= high:
+                    still = ahead - 1
+                    break
+        return still
 
     def _pulled_home(self, held: Mapping[str, float]) -> bool:
         """Whether a joint away from home is left to the home layer by every other layer."""
