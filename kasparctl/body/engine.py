@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import structlog
 
 from hal.clock import Alarm, Clock
-from hal.errors import HalError
+from hal.errors import HalError, KasparError
 from hal.servos.api import Fault, ServoApi
 from hal.servos.settings import ServoSettings
 from kasparctl.body.api import Gaze, GazeKind
@@ -112,7 +112,7 @@ class _Playback:
             self.done.set_result(None)
 
 
-class _Unplanned(Exception):
+class _Unplanned(KasparError):
     """The moment ahead cannot be foreseen: a layer begins or pulls home at the next tick."""
 
 
@@ -467,7 +467,11 @@ class LiveBody:
 
     async def step(self, now: float) -> dict[str, float]:
         """One tick: blend the layers for `now` and send the goals; the goals sent."""
-        pose = self.compose(now)
+        composed = self.compose(now)
+        # A joint held where the body last put it would be skipped by the joints layer
+        # too (its goal is its target): only the joints that move are sent to stream.
+        last = self._sent
+        pose = {joint: value for joint, value in composed.items() if last.get(joint) != value}
         if not pose:
             return {}
         try:
