@@ -370,11 +370,18 @@ class Joints:
                     # The servo already holds this count: the goal is taken (the next step
                     # goes on from it, as if sent) but no packet would move the servo.
                     continue
-                joint.written = raw
                 goals[joint.servo_id] = (raw, joint.settings.max_speed_dps)
                 written[joint.name] = goal
             if goals:
-                await self._guarded(members[0], driver.write_goals(goals, period))
+                sending = [j for j in members if j.servo_id in goals]
+                try:
+                    await self._guarded(members[0], driver.write_goals(goals, period))
+                except BaseException:
+                    for joint in sending:
+                        joint.written = None  # unknown: the next goal is sent whatever it is
+                    raise
+                for joint in sending:
+                    joint.written = goals[joint.servo_id][0]
                 self._tell(now, written, sources, STREAM)
         return self._own_values(taken)
 
