@@ -309,7 +309,8 @@ class LiveBody:
             # A resting loop knows the next tick would send nothing once no layer is left:
             # it rests now, as the ticking loop does one tick later (either wakes then at
             # the same moment, the next life or a poke, and ticks from there).
-            if (not sent or self.skipping) and self.quiet():
+            held = self._servos.commanded()  # once, for the questions below
+            if (not sent or self.skipping) and self.quiet(held):
                 # Nothing moves: no goal to send until a layer has something to do. The
                 # joints layer holds every goal meanwhile; waking costs nothing on the
                 # robot and keeps whole games in simulated time as fast as without a body.
@@ -320,7 +321,7 @@ class LiveBody:
             # look ahead then (it would find the very next tick), only in its pauses.
             speaking = self.layers.get(self._mouth_joint or "") == MOUTH_LAYER and bool(
                 self.mouth.peek(now))
-            still = self.still_ticks(due) if self.skipping and not speaking else 0
+            still = self.still_ticks(due, held) if self.skipping and not speaking else 0
             if still:
                 # The ticks ahead would send no servo a new count: sleep through them to
                 # the next that does, on the schedule; a poke wakes the loop for the tick
@@ -331,7 +332,7 @@ class LiveBody:
                     tick += still
                     arrived = True
 
-    def still_ticks(self, due: float) -> int:
+    def still_ticks(self, due: float, held: Mapping[str, float] | None = None) -> int:
         """How many ticks after the one `due` would send no servo a new count: the layers'
         trajectories looked at ahead, up to the next moment a layer begins or ends."""
         if HOME_LAYER in self.layers.values():
@@ -339,7 +340,8 @@ class LiveBody:
         period = self.period
         try:
             horizon = self._horizon()
-            held = self._servos.commanded()
+            if held is None:
+                held = self._servos.commanded()
             if self._pulled_home(held):
                 return 0
             limit = max(1, round(MAX_STILL_S / period))
@@ -434,7 +436,7 @@ class LiveBody:
             moments.append(until)
         return min(moments)
 
-    def quiet(self) -> bool:
+    def quiet(self, held: Mapping[str, float] | None = None) -> bool:
         """Whether no layer has anything to send (blinks and idle may still be scheduled)."""
         gaze_moving = self._gaze is not None and not self._gaze.settled
         return (
@@ -443,7 +445,7 @@ class LiveBody:
             and self._idle is None
             and not gaze_moving
             and not self.mouth.claimed
-            and not self.away_from_home()
+            and not self.away_from_home(held)
         )
 
     def _next_life(self) -> float | None:
@@ -573,9 +575,10 @@ class LiveBody:
             self._gaze.target.pop(joint, None)
             self._gaze.start.pop(joint, None)
 
-    def away_from_home(self) -> bool:
-        """Whether a joint still has its way home to go."""
-        held = self._servos.commanded()
+    def away_from_home(self, held: Mapping[str, float] | None = None) -> bool:
+        """Whether a joint still has its way home to go (`held`: commanded(), if read)."""
+        if held is None:
+            held = self._servos.commanded()
         home = self._home
         return any(
             abs(held[joint] - home[joint]) > HOME_EPSILON_DEG
