@@ -3,10 +3,7 @@
 Run on demand: .venv/bin/python bench/bench_game.py [--games N]
 Figures:
 - press to next robot action (a child's answer to Kaspar's reaction): p99, target < 10 ms;
-- whole games per second in simulated time, target >= 50 (per variant, state on disk and on tmpfs),
-  with the live body (the demo robot's `[body]`) and with a still one, in the same run: the
-  live body's cost is their ratio (target <= 1.5), in wall and in CPU time (the machine is
-  shared: CPU time is the steadier figure); `--profile` prints where one live game's time goes;
+- whole games per second in simulated time, target >= 50 (per variant, state on disk and on tmpfs);
 - snapshot + record per trial (fsync included), median and p99;
 - the demo's statistics beside `kasparctl simulate` for the same parameters.
 """
@@ -15,9 +12,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import cProfile
 import io
-import pstats
 import statistics
 import sys
 import tempfile
@@ -42,7 +37,6 @@ from kasparctl.vocabulary import Command
 
 LATENCY_TARGET_MS = 10.0
 GAMES_TARGET = 50.0
-LIVE_COST_TARGET = 1.5  # a game with the live body against one with a still body
 
 
 def config_for(variant: str) -> Config:
@@ -138,35 +132,16 @@ def stop_to_rest_s(games: int, state_root: Path) -> list[float]:
     return took
 
 
-def still(config: Config) -> Config:
-    return msgspec.structs.replace(
-        config, body=msgspec.structs.replace(config.body, enabled=False))
-
-
-def games_per_second(
-    variant: str, games: int, state_root: Path, *, live: bool = True
-) -> tuple[float, float]:
-    """Games per second of wall time and per second of this process's CPU time."""
-    config = config_for(variant) if live else still(config_for(variant))
-    body = "live" if live else "still"
-    start, cpu = time.perf_counter(), time.process_time()
+def games_per_second(variant: str, games: int, state_root: Path) -> float:
+    config = config_for(variant)
+    start = time.perf_counter()
     for seed in range(games):
         options = DemoOptions(
-            state_dir=state_root / f"{variant}-{body}-{seed}", seed=seed, out=io.StringIO()
+            state_dir=state_root / f"{variant}-{seed}", seed=seed, out=io.StringIO()
         )
         result = run_demo(config, options, fast=True)
         assert result.finished, result
-    return games / (time.perf_counter() - start), games / (time.process_time() - cpu)
-
-
-def profile_one_game(state_root: Path) -> None:
-    """Where a live names game's time goes: the functions of most time of their own."""
-    profile = cProfile.Profile()
-    options = DemoOptions(state_dir=state_root / "profiled", seed=1, out=io.StringIO())
-    profile.runcall(run_demo, config_for("names"), options, fast=True)
-    stream = io.StringIO()
-    pstats.Stats(profile, stream=stream).sort_stats("tottime").print_stats(15)
-    print("\none live names game, cProfile by own time:\n" + stream.getvalue())
+    return games / (time.perf_counter() - start)
 
 
 def record_and_snapshot_ms(state_root: Path, trials: int = 300) -> list[float]:
@@ -195,8 +170,6 @@ def record_and_snapshot_ms(state_root: Path, trials: int = 300) -> list[float]:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--games", type=int, default=100)
-    parser.add_argument("--profile", action="store_true",
-                        help="print where one live names game's time goes")
     arguments = parser.parse_args()
     configure_logging("error", "console", stream=sys.stderr)
     disk = Path(tempfile.mkdtemp(prefix="kaspar-bench-", dir="/var/tmp"))
@@ -219,20 +192,12 @@ def main() -> None:
     )
     for variant in ("pilot", "names"):
         for label, root in (("disk", disk), ("tmpfs", tmpfs)):
-            games = max(1, arguments.games // 2)
-            rate, cpu_rate = games_per_second(variant, games, root, live=True)
-            still_rate, still_cpu = games_per_second(variant, games, root, live=False)
+            rate = games_per_second(variant, arguments.games // 2, root)
             verdict = "PASS" if rate >= GAMES_TARGET else "FAIL"
             print(
-                f"whole {variant} games in simulated time, state on {label}: live body "
-                f"{rate:.1f} games/s (target >= {GAMES_TARGET:g}) {verdict}; still body "
-                f"{still_rate:.1f} games/s; a live game costs {still_rate / rate:.2f}x a still "
-                f"one in wall time, {still_cpu / cpu_rate:.2f}x in CPU time "
-                f"({1000 / cpu_rate:.0f} vs {1000 / still_cpu:.0f} ms of CPU a game; "
-                f"target <= {LIVE_COST_TARGET:g}x)"
+                f"whole {variant} games in simulated time, state on {label}: {rate:.1f} games/s "
+                f"(target >= {GAMES_TARGET:g}) {verdict}"
             )
-    if arguments.profile:
-        profile_one_game(tmpfs)
     costs = record_and_snapshot_ms(disk)
     print(
         f"record + snapshot per trial (fsync, rename, directory fsync) on disk: median "

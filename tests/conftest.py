@@ -29,11 +29,9 @@ def still_body_unless_asked(request: pytest.FixtureRequest, monkeypatch: pytest.
     """Games and daemons run in this process get a still body, as `replicate` gives its
     games, unless the test is marked `live_body`.
 
-    The demo's robot has `[body] enabled`: its loop, resting where no servo's count would
-    change, still makes a game in simulated time 9 to 14 times the CPU of one with a still
-    body (the mouth changes its count at nearly every tick of a line: bench/bench_game.py,
-    docs/body.md), and changes no answer, record or line those tests read. The body's own
-    tests, the soak and every command run as a subprocess keep the live body.
+    The demo's robot has `[body] enabled`: its 50 Hz loop doubles the time of a game in
+    simulated time and changes no answer, record or line those tests read. The body's
+    own tests, the soak and every command run as a subprocess keep the live body.
     """
     if request.node.get_closest_marker("live_body") is not None:
         return

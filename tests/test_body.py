@@ -502,6 +502,4 @@ def test_say_motion_writes_the_mouth_from_time_zero(tmp_path, capsys):
     rows = [line.split(",") for line in motion.read_text(encoding="utf-8").splitlines()[1:]]
     assert {row[1] for row in rows} == {"mouth_open"}
     assert max(float(row[2]) for row in rows) > 5.0 and float(rows[-1][2]) == 0.0
-    # The servo starts closed (held there since torque went on): the first goal sent is the
-    # first count it opens, one HerkuleX count (0.325 degrees) from closed.
-    assert float(rows[0][0]) >= 0.0 and 0.0 < float(rows[0][2]) <= 0.325 + 1e-9
+    assert float(rows[0][0]) >= 0.0 and float(rows[0][2]) == 0.0  # closed at the first sample

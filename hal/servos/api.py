@@ -231,20 +231,6 @@ class ServoApi(Protocol):
         """
         ...
 
-    def moves_servo(self, pose: Pose) -> bool:
-        """Whether stream(pose) now would send any servo a new raw goal (True when unsure).
-
-        A loop asks it to sleep through the steps that would change nothing a servo
-        does (a goal within the servo's count of the last one sent). Nothing is sent.
-        """
-        ...
-
-    def still_band(self, joint: str) -> tuple[float, float]:
-        """The targets (low, high degrees) for which stream() would send `joint` nothing now:
-        within its servo's last count, or anything while it takes no stream goal (claimed,
-        limp); empty (low > high) when unsure. Nothing is sent."""
-        ...
-
     async def set_compliant(self, group: str, compliant: bool) -> None:
         """Torque off (a child can move the arm by hand) or back on, holding where it is.
 

@@ -31,7 +31,7 @@ import asyncio
 import contextlib
 import math
 from collections.abc import Awaitable, Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TypeVar
 
 import structlog
@@ -43,6 +43,7 @@ from hal.errors import (
     RepeatFilter,
     ServoFaultError,
     ServoSilent,
+    SettingsError,
     UnknownJoint,
     UnsafeCommand,
 )
@@ -59,7 +60,7 @@ from hal.servos.api import (
     ServoDriver,
 )
 from hal.servos.claims import JointClaims
-from hal.servos.settings import JointSettings, ServoModel, ServoSettings
+from hal.servos.settings import JointSettings, ServoSettings
 
 log = structlog.get_logger("hal.servos.joints")
 
@@ -103,39 +104,32 @@ class _Joint:
     present: float | None = None
     torque: bool | None = None  # None until we have set it
     last_sent: float | None = None  # the last goal before torque went off (hobby servos)
-    sent_at: float | None = None  # Clock.now() of the last goal taken (stream's speed limit)
-    # The raw goal the servo was last sent while its torque is on (None: unknown or limp):
-    # a stream goal that rounds to it changes nothing the servo does and is not sent.
-    written: int | None = None
-    name: str = field(init=False)
-    servo_id: int = field(init=False)
-    _model: ServoModel = field(init=False, repr=False)
-    _low: float = field(init=False, repr=False)
-    _high: float = field(init=False, repr=False)
-    _direction: int = field(init=False, repr=False)
-    _offset: float = field(init=False, repr=False)
+    sent_at: float | None = None  # Clock.now() of the last goal written (stream's speed limit)
 
-    def __post_init__(self) -> None:
-        # Read at every goal the body streams: the settings' values, looked up once.
-        s = self.settings
-        self.name = s.name
-        self.servo_id = s.id
-        self._model = s.servo
-        self._low, self._high = s.range_deg
-        self._direction, self._offset = s.direction, s.offset_deg
+    @property
+    def name(self) -> str:
+        return self.settings.name
+
+    @property
+    def servo_id(self) -> int:
+        return self.settings.id
 
     def clamp(self, degrees: float) -> float:
-        return min(self._high, max(self._low, degrees))
+        low, high = self.settings.range_deg
+        return min(high, max(low, degrees))
 
     def to_raw(self, degrees: float) -> int:
-        return self._model.to_raw(self.clamp(degrees), self._direction, self._offset)
+        s = self.settings
+        return s.servo.to_raw(self.clamp(degrees), s.direction, s.offset_deg)
 
     def to_raw_unclamped(self, degrees: float) -> int:
         """Raw goal without the range clamp: only for a joint being brought into range."""
-        return self._model.to_raw(degrees, self._direction, self._offset)
+        s = self.settings
+        return s.servo.to_raw(degrees, s.direction, s.offset_deg)
 
     def to_degrees(self, raw: int) -> float:
-        return self._model.to_degrees(raw, self._direction, self._offset)
+        s = self.settings
+        return s.servo.to_degrees(raw, s.direction, s.offset_deg)
 
 
 class Joints:
@@ -173,8 +167,6 @@ class Joints:
         # Each coupled joint's own value, as last asked (ServoSettings.realise adds its
         # leader's share): a lid keeps it while its eye moves.
         self._own: dict[str, float] = {}
-        # The body streams 50 times a second: the virtual joints' table, read once.
-        self._virtual = settings.virtual
 
     @property
     def speed_scale(self) -> float:
@@ -348,10 +340,8 @@ class Joints:
         move's last goal). One packet per bus, no waiting beyond it. Joints whose
         torque is off (teaching) are left alone, and so are the joints a move,
         set_compliant or rest holds (their goals are dropped: the claim owns them);
-        the others go out at once, but only to a servo whose raw goal they change (a
-        HerkuleX count is 0.325 degrees: finer steps are taken, not sent). `sources` names
-        each joint's layer in the goals told to the listeners (STREAM when unnamed).
-        Returns the goals taken (sent, or within the servo's count of the last one sent).
+        the others go out at once. `sources` names each joint's layer in the goals
+        told to the listeners (STREAM when unnamed). Returns the goals sent.
         Raises UnknownJoint, UnsafeCommand (NaN target, bad period) and
         ServoFaultError while a fault is latched (or one is latched by this write).
         """
@@ -360,7 +350,7 @@ class Joints:
             raise UnsafeCommand(f"period must be a finite number > 0, found {period}")
         self._refuse_if_faulted()
         now = self.clock.now()
-        taken: dict[str, float] = {}
+        sent: dict[str, float] = {}
         for driver, members in self._by_driver(pose).items():
             # Asked again for each bus: a claim, a torque change or a fault may have come
             # while the last packet was on its way. A claimed joint's goals come from its
@@ -368,7 +358,6 @@ class Joints:
             self._refuse_if_faulted()
             claimed = self._claims.held()
             goals = {}
-            written: dict[str, float] = {}
             for joint in members:
                 start = joint.commanded
                 if joint.name in claimed or joint.torque is not True or start is None:
@@ -381,78 +370,22 @@ class Joints:
                     continue  # nothing to change: no packet for a joint at rest
                 joint.commanded = goal
                 joint.sent_at = now
-                taken[joint.name] = goal
-                raw = joint.to_raw(goal)
-                if raw == joint.written:
-                    # The servo already holds this count: the goal is taken (the next step
-                    # goes on from it, as if sent) but no packet would move the servo.
-                    continue
-                goals[joint.servo_id] = (raw, self._limit(joint))
-                written[joint.name] = goal
+                goals[joint.servo_id] = (joint.to_raw(goal), self._limit(joint))
+                sent[joint.name] = goal
             if goals:
-                sending = [j for j in members if j.servo_id in goals]
-                try:
-                    await self._guarded(members[0], driver.write_goals(goals, period))
-                except BaseException:
-                    for joint in sending:
-                        joint.written = None  # unknown: the next goal is sent whatever it is
-                    raise
-                for joint in sending:
-                    joint.written = goals[joint.servo_id][0]
-                self._tell(now, written, sources, STREAM)
-        return self._own_values(taken)
-
-    def moves_servo(self, pose: Pose) -> bool:
-        """Whether stream(pose) now would send any servo a new raw goal (True when unsure:
-        a coupled robot, an unknown joint, a target that is not a number).
-
-        The speed limit is not applied: a target within its servo's last count is one a
-        stream reaches without a packet, and one beyond it is sent either way.
-        """
-        if self.settings.couplings:
-            return True
-        claimed = self._claims.held()
-        for name, degrees in pose.items():
-            if not math.isfinite(degrees):
-                return True
-            for real, ratio in self._virtual.get(name, {name: 1.0}).items():
-                joint = self._joints.get(real)
-                if joint is None:
-                    return True
-                if real in claimed or joint.torque is not True or joint.commanded is None:
-                    continue
-                if joint.to_raw(ratio * degrees) != joint.written:
-                    return True
-        return False
-
-    def still_band(self, joint: str) -> tuple[float, float]:
-        """The targets (low, high degrees) for which stream() would send `joint` nothing now:
-        within its servo's last count (and its range), anything while it takes no stream goal
-        (claimed, limp); empty (low > high) when unsure (a coupled robot, a virtual or unknown
-        joint, a count not yet sent)."""
-        found = self._joints.get(joint)
-        if found is None or self.settings.couplings:
-            return math.inf, -math.inf
-        if joint in self._claims.held() or found.torque is not True or found.commanded is None:
-            return -math.inf, math.inf
-        if found.written is None:
-            return math.inf, -math.inf
-        model = found._model
-        # Degrees that round to the count sent: centre + direction (d - offset) / unit
-        # within half a count of it, a hair inside so a tie never counts as the same.
-        half = 0.5 - 1e-6
-        ends = [
-            found._offset + found._direction * model.degrees_per_unit * (
-                found.written + side * half - model.raw_centre)
-            for side in (-1, 1)
-        ]
-        return max(min(ends), found._low), min(max(ends), found._high)
+                await self._guarded(members[0], driver.write_goals(goals, period))
+                self._tell(
+                    now,
+                    {j.name: sent[j.name] for j in members if j.servo_id in goals},
+                    sources,
+                    STREAM,
+                )
+        return self._own_values(sent)
 
     def _realise(self, pose: Pose) -> dict[str, float]:
         """`pose` as the real joints' goals (virtual joints expanded, followers moved)."""
-        virtual = self._virtual
-        joints = self._joints
-        unknown = [name for name in pose if name not in joints and name not in virtual]
+        virtual = self.settings.virtual
+        unknown = [name for name in pose if name not in self._joints and name not in virtual]
         if unknown:
             raise UnknownJoint(f"unknown joints: {', '.join(unknown)}")
         if not virtual and not self.settings.couplings:
@@ -460,25 +393,10 @@ class Joints:
         for name, degrees in pose.items():
             if not math.isfinite(degrees):
                 raise UnsafeCommand(f"{name}: target {degrees} is not a number")
-        expanded: dict[str, float] = {}
-        via: dict[str, str] = {}
-        for name, degrees in pose.items():
-            drives = virtual.get(name)
-            if drives is None:
-                if name in expanded:
-                    raise UnsafeCommand(
-                        f"joint {name!r} is set twice: by {via[name]} and by {name}")
-                expanded[name] = degrees
-                via[name] = name
-                continue
-            for joint, ratio in drives.items():
-                if joint in expanded:
-                    raise UnsafeCommand(
-                        f"joint {joint!r} is set twice: by {via[joint]} and by {name}")
-                expanded[joint] = ratio * degrees
-                via[joint] = name
-        if not self.settings.couplings:
-            return expanded
+        try:
+            expanded = self.settings.expand(pose)
+        except SettingsError as error:
+            raise UnsafeCommand(str(error)) from None
         for coupling in self.settings.couplings:
             if coupling.joint in expanded:
                 # Its own value, as asked (within its range): what it keeps when only its
@@ -492,7 +410,7 @@ class Joints:
             if coupling.follows in expanded and coupling.joint in where:
                 # From here on its own value is kept, not re-read through a clamped goal.
                 self._own.setdefault(coupling.joint, where[coupling.joint])
-        return self.settings.realise(expanded, where, expanded=True)
+        return self.settings.realise(pose, where)
 
     def _own_values(self, goals: dict[str, float]) -> dict[str, float]:
         """`goals` with each follower's own value (its goal without its leader's share)."""
@@ -570,7 +488,6 @@ class Joints:
                 s = joint.settings
                 raw = s.servo.to_raw(joint.commanded, s.direction, s.offset_deg)
                 goals[joint.servo_id] = (raw, s.max_speed_dps)
-                joint.written = raw
             await self._guarded(members[0], driver.write_goals(goals, self.step))
             self._tell(self.clock.now(), {j.name: j.present for j in members
                                           if j.present is not None}, None, TORQUE_ON)
@@ -875,8 +792,8 @@ class Joints:
                     low, high = joint.settings.range_deg
                     low, high = min(low, start), max(high, start)
                     joint.commanded = max(low, min(high, start + (end - start) * fraction))
-                    joint.written = joint.to_raw_unclamped(joint.commanded)
-                    goals[joint.servo_id] = (joint.written, limits[joint.name])
+                    goals[joint.servo_id] = (joint.to_raw_unclamped(joint.commanded),
+                                             limits[joint.name])
                     joint.sent_at = written
                 await self._guarded(members[0], driver.write_goals(goals, self.step))
                 self._tell(written, {j.name: j.commanded for j in members
@@ -962,7 +879,7 @@ class Joints:
                 if not on:
                     if joint.commanded is not None:
                         joint.last_sent = joint.commanded
-                    joint.commanded = joint.written = None
+                    joint.commanded = None
 
     async def _bus_lost(self, joints: list[_Joint], error: BaseException, act: bool = True) -> None:
         """Every joint behind an adapter that went away: one fault each, one log line for all
@@ -1011,7 +928,7 @@ class Joints:
                 joint.torque = False
                 if joint.commanded is not None:
                     joint.last_sent = joint.commanded
-                joint.commanded = joint.written = None
+                joint.commanded = None
 
     def _repeat(self, key: str, kind: str, detail: str) -> None:
         if self._repeats.first(key, f"{kind}: {detail}"):

@@ -394,20 +394,15 @@ class ServoSettings(_Settings, frozen=True):
         return out
 
     def realise(
-        self,
-        pose: Mapping[str, float],
-        where: Mapping[str, float] | None = None,
-        *,
-        expanded: bool = False,
+        self, pose: Mapping[str, float], where: Mapping[str, float] | None = None
     ) -> dict[str, float]:
         """The real joints' goals for `pose`: virtual joints expanded, couplings applied.
 
         A follower's own value is its value in the pose, else `where` it is (its rest
         if unknown); it moves whenever it or its leader is in the pose, so a move of
-        the eyeball's pitch carries the lid with it. `expanded`: `pose` is already in real
-        joints (expand's result), not expanded again.
+        the eyeball's pitch carries the lid with it.
         """
-        goals = dict(pose) if expanded else self.expand(pose)
+        goals = self.expand(pose)
         if not self.couplings:
             return goals
         rests = {joint.name: joint.rest_deg for joint in self.joints}

@@ -80,8 +80,6 @@ class SimDriver:
         elapsed = 0.0 if self._stamp is None else now - self._stamp
         self._stamp = now
         for servo in self.servos.values():
-            if servo.present == servo.goal and servo.hand is None:
-                continue  # at its goal (or limp where it lies): nothing moves it
             if not servo.torque and servo.hand is not None:
                 servo.present = servo.goal = servo.hand(now)
             if not servo.torque or servo.fault is FaultKind.SILENT:

@@ -96,20 +96,6 @@ class Mouth:
             self._levels.clear()
             return None
         self._forget_before(now - 1.0)
-        return self._heard(now)
-
-    def peek(self, now: float) -> float | None:
-        """What opening(now) will say, for a moment to come, changing nothing."""
-        if self._until is None or now > self._until:
-            return None
-        return self._heard(now)
-
-    @property
-    def until(self) -> float | None:
-        """When the mouth is left to the other layers, unless a line comes (None: it is)."""
-        return self._until
-
-    def _heard(self, now: float) -> float:
         low = bisect.bisect_right(self._starts, now - self._window / 2) - 1
         high = bisect.bisect_left(self._starts, now + self._window / 2)
         chosen = [
