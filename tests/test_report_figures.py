@@ -28,6 +28,8 @@ from kasparctl.research.children import ChildMeasures, Children, Feedback
 from kasparctl.research.conditions import Condition, Factors, Problem, by_condition
 from kasparctl.research.figure_style import MARKERS, MIN_N, OKABE_ITO, PAGE_HEIGHT, PAGE_WIDTH
 from kasparctl.research.figures import (
+    FORMATS,
+    SVG,
     FigureData,
     clipped_texts,
     draw_all,
@@ -373,7 +375,7 @@ def test_the_files_are_a_300_dpi_png_a_pdf_with_real_text_and_an_svg(
     from PIL import Image
 
     data = studies["cohort with participants"]
-    drawn = draw_all(data, tmp_path)
+    drawn = draw_all(data, tmp_path, (*FORMATS, SVG))
     assert drawn.names == list(FIGURES) and drawn.failed == []
     assert drawn.notes == []
     for name in FIGURES:

@@ -1,4 +1,4 @@
-"""The report's figures for a journal: PNG at 300 dpi, PDF and SVG with real text.
+"""The report's figures for a journal: PNG at 300 dpi, PDF (and SVG on request) with real text.
 
 Fig. 2 (entropy_by_trial), Fig. 3 (final_q), trials_to_learn, feedback_by_child and
 contrasts, a module each (figure_entropy, figure_final_q, figure_trials,
@@ -17,7 +17,7 @@ state are involved.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,12 +27,13 @@ from kasparctl.research.figure_data import Drawn, FigureData
 from kasparctl.research.figure_entropy import entropy_by_trial
 from kasparctl.research.figure_feedback import feedback_by_child, wilson
 from kasparctl.research.figure_final_q import final_q
-from kasparctl.research.figure_render import FORMATS, Rendered, render, save
+from kasparctl.research.figure_render import FORMATS, SVG, Rendered, render, save
 from kasparctl.research.figure_style import RC
 from kasparctl.research.figure_trials import trials_to_learn
 
 __all__ = [
     "FORMATS",
+    "SVG",
     "Drawn",
     "FigureData",
     "FiguresUnavailable",
@@ -93,10 +94,11 @@ def page_name(name: str, page: int) -> str:
     return name if page == 1 else f"{name}-{page}"
 
 
-def draw_all(data: FigureData, out: Path) -> Drawn:
-    """Draw every figure the data allow into `out`, each page as PNG, PDF and SVG."""
+def draw_all(data: FigureData, out: Path, formats: Sequence[str] = FORMATS) -> Drawn:
+    """Draw every figure the data allow into `out`, each page in `formats` (PNG and PDF;
+    SVG too if asked)."""
     require_matplotlib()
-    drawn = Drawn()
+    drawn = Drawn(formats=list(formats))
     for name, draw in figure_table(data).items():
         try:
             pages, note = draw()
@@ -106,7 +108,7 @@ def draw_all(data: FigureData, out: Path) -> Drawn:
             for page, figure in enumerate(pages, 1):
                 rendered = render(figure)
                 _check(rendered, name, page, drawn)
-                save(rendered, out, page_name(name, page))
+                save(rendered, out, page_name(name, page), formats)
         except (ValueError, TypeError, IndexError, ZeroDivisionError, OverflowError) as error:
             # Sessions the tests never imagined must not cost the rest of the report: the
             # figure is left out and the summary's notes (and stderr) say why.
