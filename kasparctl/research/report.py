@@ -53,11 +53,13 @@ def write_report(
     out: Path,
     method: Method,
     svg: bool = False,
+    workers: int = 1,
 ) -> Written:
     """Draw the figures and write the summaries and children.csv into `out` (made 0700).
 
     `participants_file` is the participants.csv as the researcher named it (the summary
-    says so). Each figure is written as PNG and PDF, and as SVG too when `svg`. A figure
+    says so). Each figure is written as PNG and PDF, and as SVG too when `svg`,
+    by up to `workers` processes at once. A figure
     that could not be drawn is a warning on stderr; the rest is written.
     """
     children = Children()
@@ -78,7 +80,7 @@ def write_report(
 
     private_directory(out)
     data = FigureData(conditions, found, bands, measured, participants, contrasts)
-    drawn = draw_all(data, out, (*FORMATS, SVG) if svg else FORMATS)
+    drawn = draw_all(data, out, (*FORMATS, SVG) if svg else FORMATS, workers)
     for note in drawn.notes:
         if note.split(":")[0] in drawn.failed:
             print(f"warning: {note}", file=sys.stderr)
