@@ -2,6 +2,7 @@
 
 Run on demand: .venv/bin/python bench/bench_report.py [--sessions N] [--games N]
                  [--cache DIR] [--fresh] [--profile FILE] [--keep DIR]
+                 [--against CHECKOUT] [--workers N]
 Figures: the whole report (read every session, the paper's statistics per condition,
 intervals and contrasts, every figure as 300-dpi PNG and PDF, summary.md and .json,
 children.csv) in a child process: its wall time (target < 15 s) and its peak RSS (target
