@@ -28,6 +28,8 @@ from kasparctl.research.children import ChildMeasures, Children, Feedback
 from kasparctl.research.conditions import Condition, Factors, Problem, by_condition
 from kasparctl.research.figure_style import MARKERS, MIN_N, OKABE_ITO, PAGE_HEIGHT, PAGE_WIDTH
 from kasparctl.research.figures import (
+    FORMATS,
+    SVG,
     FigureData,
     clipped_texts,
     draw_all,
@@ -373,7 +375,7 @@ def test_the_files_are_a_300_dpi_png_a_pdf_with_real_text_and_an_svg(
     from PIL import Image
 
     data = studies["cohort with participants"]
-    drawn = draw_all(data, tmp_path)
+    drawn = draw_all(data, tmp_path, (*FORMATS, SVG))
     assert drawn.names == list(FIGURES) and drawn.failed == []
     assert drawn.notes == []
     for name in FIGURES:
@@ -388,6 +390,24 @@ def test_the_files_are_a_300_dpi_png_a_pdf_with_real_text_and_an_svg(
         assert b"/FontFile2" in pdf and b"/Type3" not in pdf, name
         svg = (tmp_path / f"{name}.svg").read_text()
         assert "<text" in svg and "<defs>\n  <path id=\"DejaVuSans" not in svg, name
+
+
+def test_figures_drawn_in_parallel_are_those_drawn_one_after_another(
+    studies: dict[str, FigureData], tmp_path: Path
+) -> None:
+    data = studies["cohort with participants"]
+    serial, parallel = tmp_path / "serial", tmp_path / "parallel"
+    serial.mkdir()
+    parallel.mkdir()
+    one = draw_all(data, serial, workers=1)
+    two = draw_all(data, parallel, workers=2)
+    assert two == one and one.names == list(FIGURES)
+    files = sorted(p.name for p in serial.iterdir())
+    assert sorted(p.name for p in parallel.iterdir()) == files
+    assert files == sorted(f"{name}.{kind}" for name in FIGURES for kind in FORMATS)
+    # The same bytes: each worker draws its figure under the same settings as serially.
+    for name in files:
+        assert (parallel / name).read_bytes() == (serial / name).read_bytes(), name
 
 
 def test_the_power_figure_is_not_cut_off() -> None:

@@ -1,8 +1,9 @@
 """`kasparctl report`: the paper's figures and statistics for recorded sessions, with intervals.
 
 Writes to --out: entropy_by_trial, final_q, trials_to_learn, feedback_by_child
-and contrasts, each as PNG and SVG, summary.md, summary.json and children.csv
-(each child's teaching measures, joined to participants.csv when given).
+and contrasts, each as 300-dpi PNG and PDF (and SVG with --svg), summary.md,
+summary.json and children.csv (each child's teaching measures, joined to
+participants.csv when given).
 Sessions of different conditions are shown side by side; every interval is a
 95 % cluster bootstrap over groups of children (--cluster session: over
 sessions). --state-dir may be repeated to pool robots or days. The figures
@@ -49,6 +50,11 @@ def register(subparsers: Any) -> None:
     add("--bootstrap", type=whole(100, MAX_REPLICATES), default=DEFAULT_REPLICATES, metavar="N",
         help=f"bootstrap resamples (default {DEFAULT_REPLICATES})")
     add("--seed", type=seed, default=DEFAULT_SEED, help="seed of the resampling (default 0)")
+    add("--workers", type=whole(1, 64), default=1, metavar="N",
+        help="processes drawing the figures at once, one figure each (default 1: each "
+             "worker takes up to about 200 MB at 720 sessions)")
+    add("--svg", action="store_true",
+        help="also write each figure as SVG (text as <text>); PNG and PDF are always written")
     parser.set_defaults(run=run)  # fmt: skip
 
 
@@ -75,7 +81,8 @@ def run(arguments: argparse.Namespace) -> int:
     method = Method(arguments.bootstrap, arguments.seed, arguments.cluster)
     try:
         written = write_report(
-            sessions, source, participants, arguments.participants, out, method
+            sessions, source, participants, arguments.participants, out, method, arguments.svg,
+            arguments.workers,
         )
     except OSError as error:
         where = f"{error.filename}: " if error.filename else ""

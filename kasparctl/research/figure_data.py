@@ -35,3 +35,5 @@ class Drawn:
     failed: list[str] = field(default_factory=list)
     # Pages of each figure drawn: name.png, then name-2.png, name-3.png...
     pages: dict[str, int] = field(default_factory=dict)
+    # The files written for each page, by suffix ("png", "pdf", and "svg" if asked).
+    formats: list[str] = field(default_factory=list)

@@ -5,12 +5,13 @@ the PNG (written from the canvas's buffer, not drawn again), the texts it showed
 their boxes on the same renderer, which the checks read: a label cut off by the
 figure's edge or by the axes that clip it, and two labels over each other. (The old
 check drew the whole figure again for each question it asked: 47 of 185 seconds at
-720 sessions.) The PDF and SVG are vector files, each drawn by its own backend.
+720 sessions.) The PDF (and the SVG, with --svg) are vector files, each drawn by its own backend.
 """
 
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,9 @@ from typing import Any
 from kasparctl.research.figure_style import PNG_DPI, RC
 from kasparctl.research.output import write_bytes
 
-FORMATS = ("png", "pdf", "svg")
+# The issue asks for PDF and 300-dpi PNG; SVG, a fifth of the drawing time, on request.
+FORMATS = ("png", "pdf")
+SVG = "svg"
 
 
 @dataclass
@@ -142,10 +145,12 @@ def vector_bytes(figure: Any, kind: str) -> bytes:
     return buffer.getvalue()
 
 
-def save(rendered: Rendered, out: Path, name: str) -> list[Path]:
-    """Write the figure as name.png, name.pdf and name.svg (each atomically)."""
+def save(
+    rendered: Rendered, out: Path, name: str, formats: Sequence[str] = FORMATS
+) -> list[Path]:
+    """Write the figure as name.png, name.pdf (and name.svg if asked), each atomically."""
     written = []
-    for kind in FORMATS:
+    for kind in formats:
         data = png_bytes(rendered) if kind == "png" else vector_bytes(rendered.figure, kind)
         path = out / f"{name}.{kind}"
         write_bytes(path, data)

@@ -2,7 +2,7 @@
 
 Into one private directory: entropy_by_trial, final_q, trials_to_learn,
 feedback_by_child and contrasts (kasparctl.research.figures, each as PNG and
-SVG), summary.md and summary.json (kasparctl.research.summary) and children.csv
+PDF, and SVG on request), summary.md and summary.json (kasparctl.research.summary) and children.csv
 (each child's teaching measures, joined to participants.csv when given).
 Sessions of different conditions are shown side by side; every interval is a 95 %
 cluster bootstrap (kasparctl.research.inference) over the chosen unit.
@@ -23,7 +23,7 @@ from kasparctl.game.phrases import load_phrasebook
 from kasparctl.research.catalogue import SessionData
 from kasparctl.research.children import Children
 from kasparctl.research.conditions import by_condition, by_uncertainty, learner_split, pooled
-from kasparctl.research.figures import FigureData, draw_all
+from kasparctl.research.figures import FORMATS, SVG, FigureData, draw_all
 from kasparctl.research.inference import (
     attribute_contrasts,
     condition_contrasts,
@@ -52,11 +52,15 @@ def write_report(
     participants_file: str | None,
     out: Path,
     method: Method,
+    svg: bool = False,
+    workers: int = 1,
 ) -> Written:
     """Draw the figures and write the summaries and children.csv into `out` (made 0700).
 
     `participants_file` is the participants.csv as the researcher named it (the summary
-    says so). A figure that could not be drawn is a warning on stderr; the rest is written.
+    says so). Each figure is written as PNG and PDF, and as SVG too when `svg`,
+    by up to `workers` processes at once. A figure
+    that could not be drawn is a warning on stderr; the rest is written.
     """
     children = Children()
     conditions = by_condition(sessions, source.params, children, method.unit)
@@ -76,7 +80,7 @@ def write_report(
 
     private_directory(out)
     data = FigureData(conditions, found, bands, measured, participants, contrasts)
-    drawn = draw_all(data, out)
+    drawn = draw_all(data, out, (*FORMATS, SVG) if svg else FORMATS, workers)
     for note in drawn.notes:
         if note.split(":")[0] in drawn.failed:
             print(f"warning: {note}", file=sys.stderr)
@@ -93,9 +97,8 @@ def write_report(
     summary["figures"] = drawn.names
     summary["notes"] = [*_learner_notes(sessions), *drawn.notes]
     write_json(out / "summary.json", summary)
-    write_bytes(
-        out / "summary.md", markdown(summary, drawn.names, summary["notes"]).encode("utf-8")
-    )
+    text = markdown(summary, drawn.names, summary["notes"], drawn.formats)
+    write_bytes(out / "summary.md", text.encode("utf-8"))
     with atomic_file(out / "children.csv") as stream:
         _write_children(stream, joined(coded_only=False))
     return Written([c.label for c in conditions], list(drawn.names))

@@ -492,7 +492,12 @@ def _forced_caveat(summary: dict[str, Any]) -> list[str]:
     ]
 
 
-def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[str]) -> str:
+def markdown(
+    summary: dict[str, Any],
+    figures: Sequence[str],
+    notes: Sequence[str],
+    formats: Sequence[str] = ("png", "pdf"),
+) -> str:
     """The report's summary.md: the conditions side by side, contrasts, children, figures."""
     columns = list(summary["conditions"])
     if len(columns) > 1:
@@ -554,8 +559,18 @@ def markdown(summary: dict[str, Any], figures: Sequence[str], notes: Sequence[st
         lines += [*_children_table(summary["children"]), ""]
     if figures:
         lines += ["## Figures", ""]
-        lines += [f"- [{name}]({name}.svg) ([PNG]({name}.png))" for name in figures]
+        lines += [_figure_links(name, formats) for name in figures]
         lines.append("")
     if notes:
         lines += ["## Notes", "", *(f"- {note}" for note in notes), ""]
     return "\n".join(lines)
+
+
+def _figure_links(name: str, formats: Sequence[str]) -> str:
+    """A figure's line in summary.md: a link to each file that was written, PDF first."""
+    order = [kind for kind in ("pdf", "png", "svg") if kind in formats]
+    if not order:
+        return f"- {name}"
+    first, *rest = order
+    others = "".join(f" ([{kind.upper()}]({name}.{kind}))" for kind in rest)
+    return f"- [{name}]({name}.{first}){others}"
