@@ -466,9 +466,9 @@ SESSIONS: tuple[Column, ...] = (
     _setting("locations", "list", "the pilot's locations"),
     _setting(
         "prompt_after_s",
-        "number",
-        "seconds of silence before Kaspar asks again (step 4)",
-        minimum=0,
+        "list",
+        "seconds of silence before each prompt after a question (first, second, then the "
+        "call for help)",
     ),
     _setting("step_prompt_after_s", "number", "the same in the other steps", minimum=0),
     _setting("reactions", "string", "Kaspar's happy and sad reactions: `paper`, `all` or `none`"),
