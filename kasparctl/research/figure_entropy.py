@@ -27,6 +27,7 @@ from kasparctl.research.figure_style import (
     grid_shape,
     new_figure,
     short,
+    whiskers,
 )
 
 PANELS_PER_PAGE = 6
@@ -169,18 +170,8 @@ def _panel(
         highs = np.array([np.nan if e.high is None else e.high for e in found], dtype=float)
         bounded = shown[~np.isnan(lows[shown])]
         if len(bounded):
-            axes.errorbar(
-                ks[bounded],
-                means[bounded],
-                yerr=[
-                    np.maximum(means[bounded] - lows[bounded], 0),
-                    np.maximum(highs[bounded] - means[bounded], 0),
-                ],
-                fmt="none",
-                ecolor=style.colour,
-                elinewidth=0.6,
-                capsize=0,
-                alpha=0.7,
+            whiskers(
+                axes, ks[bounded], means[bounded], lows[bounded], highs[bounded], style.colour,
                 zorder=2,
             )
         counts.append((style, list(range(1, len(ns) + 1)), [int(n) for n in ns]))

@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 # Okabe & Ito (2008), "Color Universal Design": distinguishable under the common colour
 # vision deficiencies. Black first, yellow last (faint on white, so the last resort).
 OKABE_ITO = (
@@ -137,3 +139,22 @@ def chunks(items: list[Any], size: int) -> list[list[Any]]:
     count = -(-len(items) // size)
     per = -(-len(items) // count)
     return [items[start : start + per] for start in range(0, len(items), per)]
+
+
+def whiskers(axes: Any, x: Any, y: Any, low: Any, high: Any, colour: str, **extra: Any) -> None:
+    """95 % whiskers on the points that have an interval, in one look for every figure.
+
+    The distances are clipped at 0: an interval clipped to the measure's range may end at
+    the estimate, and matplotlib refuses a negative error.
+    """
+    axes.errorbar(
+        x,
+        y,
+        yerr=[np.maximum(y - low, 0), np.maximum(high - y, 0)],
+        fmt="none",
+        ecolor=colour,
+        elinewidth=0.6,
+        capsize=0,
+        alpha=0.7,
+        **extra,
+    )

@@ -26,6 +26,7 @@ from kasparctl.research.figure_style import (
     grid_shape,
     new_figure,
     short,
+    whiskers,
 )
 
 PANELS_PER_PAGE = 6
@@ -179,18 +180,8 @@ def _panel(
         low, high = np.array(lows), np.array(highs)
         bounded = ~np.isnan(low)
         if bounded.any():
-            axes.errorbar(
-                x[bounded],
-                shares[bounded],
-                yerr=[
-                    np.maximum(shares[bounded] - low[bounded], 0),
-                    np.maximum(high[bounded] - shares[bounded], 0),
-                ],
-                fmt="none",
-                ecolor=style.colour,
-                elinewidth=0.6,
-                capsize=0,
-                alpha=0.7,
+            whiskers(
+                axes, x[bounded], shares[bounded], low[bounded], high[bounded], style.colour
             )
             tallest = max(tallest, float(np.nanmax(high)))
         tallest = max(tallest, float(shares.max()))
