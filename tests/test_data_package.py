@@ -190,8 +190,15 @@ def test_psych_ds_layout_describes_every_column(study: Study, tmp_path: Path) ->
         "study-kaspar_description-sessions_data.csv",
         "study-kaspar_description-trials_data.csv",
     ]
+    headers: set[str] = set()
     for path in data:
-        assert set(next(csv.reader(path.open()))) <= measured, path.name
+        # The Psych-DS validator's Datafile rule: keyword-value pairs, then _data.csv.
+        assert re.fullmatch(r"([a-z]+-[a-zA-Z0-9]+)(_[a-z]+-[a-zA-Z0-9]+)*_data\.csv", path.name)
+        header = set(next(csv.reader(path.open())))
+        assert header <= measured, path.name  # else CSV_COLUMN_MISSING_FROM_METADATA
+        headers |= header
+    # A variable measured in no CSV is the validator's VARIABLE_MISSING_FROM_CSV_COLUMNS error.
+    assert measured == headers
     assert frictionless_validate(out / "datapackage.json").returncode == 0
 
 
