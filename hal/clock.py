@@ -70,23 +70,40 @@ class Alarm:
         self._clock = clock
         self._timer: MonotonicTimer | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._rung: asyncio.Future[None] | None = None
+        self._rung: asyncio.Future[bool] | None = None
         self._plain = not isinstance(clock, MonotonicClock | LoopClock)
 
-    async def sleep_until(self, moment: float) -> None:
-        """Return at `moment` of the clock (at once when it has passed); cancellable."""
+    async def sleep_until(self, moment: float) -> bool:
+        """Return at `moment` of the clock (at once when it has passed), or sooner when
+        interrupt() is called; whether it was. Cancellable."""
         loop = asyncio.get_running_loop()
         timer = None if self._plain else self._timer_on(loop)
-        if timer is None:
-            await self._clock.sleep(max(0.0, moment - self._clock.now()))
-            return
         self._rung = rung = loop.create_future()
-        # Arming resets the timer's count of expiries: an old one cannot ring this wait.
-        timer.arm(moment)
+        waiting: asyncio.TimerHandle | asyncio.Task[None] | None = None
+        if timer is not None:
+            # Arming resets the timer's count of expiries: an old one cannot ring this wait.
+            timer.arm(moment)
+        elif isinstance(self._clock, LoopClock):
+            # The loop's own timer (a simulated loop jumps to it): one handle, no task.
+            waiting = loop.call_at(moment, self._ring_plain)
+        else:
+            waiting = loop.create_task(self._clock.sleep(max(0.0, moment - self._clock.now())))
+            waiting.add_done_callback(lambda _: self._ring_plain())
         try:
-            await rung
+            return bool(await rung)
         finally:
             self._rung = None
+            if waiting is not None:
+                waiting.cancel()
+
+    def interrupt(self) -> None:
+        """End the wait in progress now (sleep_until returns True); nothing when none is."""
+        if self._rung is not None and not self._rung.done():
+            self._rung.set_result(True)
+
+    def _ring_plain(self) -> None:
+        if self._rung is not None and not self._rung.done():
+            self._rung.set_result(False)
 
     def _ring(self) -> None:
         # Two syscalls a tick: the arm and this read. The reader stays registered
@@ -94,7 +111,7 @@ class Alarm:
         if self._timer is None or not self._timer.take():
             return
         if self._rung is not None and not self._rung.done():
-            self._rung.set_result(None)
+            self._rung.set_result(False)
 
     def _timer_on(self, loop: asyncio.AbstractEventLoop) -> MonotonicTimer | None:
         if self._timer is not None and self._loop is loop:

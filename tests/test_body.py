@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import random
+import re
 from pathlib import Path
 
 import msgspec
@@ -298,8 +299,9 @@ async def test_a_gaze_asked_before_life_is_forbidden_turns_the_head_there_and_ho
     await run_ticks(body, clock, 1.0)
     bag = dict(CONFIG.body.gaze.bags[0])
     held = servos.commanded()
-    assert held["head_yaw"] == pytest.approx(bag["head_yaw"], abs=0.1)
-    assert held["head_pitch"] == pytest.approx(bag["head_pitch"], abs=0.1)
+    # At the bag's pose as the servo has it: its count (the last goal within it is not sent).
+    for joint in ("head_yaw", "head_pitch"):
+        assert servos.count_of(joint, held[joint]) == servos.count_of(joint, bag[joint])
     assert held["left_eyelid"] == 0.0  # no blink, no idle movement
     body.look_at(Gaze(GazeKind.CHILD, 0))  # no new gaze while life is off
     await run_ticks(body, clock, 1.0)
@@ -480,7 +482,10 @@ def test_behaviour_check_and_play_on_the_command_line(tmp_path, capsys):
     motion = tmp_path / "nod.csv"
     assert main(["behaviour", "play", "nod", "--config", str(config), "--motion",
                  str(motion)]) == 0
-    assert "head_pitch +0.0..+9.0" in capsys.readouterr().out
+    # The goals sent: from within a count of where it stood (the first and last goals that
+    # round to the count already held are not sent) to the nod's depth.
+    low, high = re.search(r"head_pitch \+([\d.]+)\.\.\+([\d.]+)", capsys.readouterr().out).groups()
+    assert float(low) <= _unit("head_pitch") and float(high) == 9.0
     lines = motion.read_text(encoding="utf-8").splitlines()
     assert lines[0] == "time_s,joint,position_deg" and {ln.split(",")[1] for ln in lines[1:]} == {
         "head_pitch"}
@@ -502,4 +507,10 @@ def test_say_motion_writes_the_mouth_from_time_zero(tmp_path, capsys):
     rows = [line.split(",") for line in motion.read_text(encoding="utf-8").splitlines()[1:]]
     assert {row[1] for row in rows} == {"mouth_open"}
     assert max(float(row[2]) for row in rows) > 5.0 and float(rows[-1][2]) == 0.0
-    assert float(rows[0][0]) >= 0.0 and float(rows[0][2]) == 0.0  # closed at the first sample
+    # Opening from closed at the first sample: its first goal is the first count above it.
+    assert float(rows[0][0]) >= 0.0 and 0.0 < float(rows[0][2]) <= _unit("mouth_open") + 1e-9
+
+
+def _unit(joint: str) -> float:
+    """Degrees per count of `joint`'s servo on the demo robot."""
+    return next(j for j in CONFIG.servos.joints if j.name == joint).servo.degrees_per_unit

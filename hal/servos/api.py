@@ -223,12 +223,28 @@ class ServoApi(Protocol):
         """One control step toward `pose`, for a loop that sends a goal every `period` s.
 
         Each goal is clamped to its joint's range and moves from the joint's last goal
-        by at most its speed limit times the time since that goal (at most `period`).
+        by at most its speed limit times the time since that goal (counting at most `period`,
+        or the time one count takes at the limit if longer); a goal that would not change
+        the servo's count is not sent and leaves the joint's last goal as it was.
         Joints claimed by a move, set_compliant or rest, and limp joints, are left alone.
         `sources` names the layer of each joint's goal (STREAM when not named). Returns
         the goals sent. Raises UnknownJoint, UnsafeCommand (NaN target, bad period) and
         ServoFaultError while a fault is latched.
         """
+        ...
+
+    def sends(self, pose: Pose, at: float, period: float) -> bool:
+        """Whether stream(pose, period) at `at` would send any servo a new count (True while
+        a fault is latched). Nothing is sent or changed: a loop asks it to rest through the
+        steps that would change nothing a servo does."""
+        ...
+
+    def count_of(self, joint: str, degrees: float) -> int:
+        """The raw count `joint`'s servo would be sent for `degrees` (clamped to its range)."""
+        ...
+
+    def speed_limit(self, joint: str) -> float:
+        """`joint`'s speed limit now, degrees per second (the session's scale applied)."""
         ...
 
     async def set_compliant(self, group: str, compliant: bool) -> None:

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import math
 from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -60,7 +61,7 @@ from hal.servos.api import (
     ServoDriver,
 )
 from hal.servos.claims import JointClaims
-from hal.servos.settings import JointSettings, ServoSettings
+from hal.servos.settings import CouplingSettings, JointSettings, ServoModel, ServoSettings
 
 log = structlog.get_logger("hal.servos.joints")
 
@@ -118,18 +119,23 @@ class _Joint:
         low, high = self.settings.range_deg
         return min(high, max(low, degrees))
 
+    @functools.cached_property
+    def servo(self) -> ServoModel:
+        # Built from the settings on each read there: every tick asks it of every joint.
+        return self.settings.servo
+
     def to_raw(self, degrees: float) -> int:
         s = self.settings
-        return s.servo.to_raw(self.clamp(degrees), s.direction, s.offset_deg)
+        return self.servo.to_raw(self.clamp(degrees), s.direction, s.offset_deg)
 
     def to_raw_unclamped(self, degrees: float) -> int:
         """Raw goal without the range clamp: only for a joint being brought into range."""
         s = self.settings
-        return s.servo.to_raw(degrees, s.direction, s.offset_deg)
+        return self.servo.to_raw(degrees, s.direction, s.offset_deg)
 
     def to_degrees(self, raw: int) -> float:
         s = self.settings
-        return s.servo.to_degrees(raw, s.direction, s.offset_deg)
+        return self.servo.to_degrees(raw, s.direction, s.offset_deg)
 
 
 class Joints:
@@ -167,6 +173,12 @@ class Joints:
         # Each coupled joint's own value, as last asked (ServoSettings.realise adds its
         # leader's share): a lid keeps it while its eye moves.
         self._own: dict[str, float] = {}
+        # Real joints no coupling joins: a pose of these alone is its own goals.
+        coupled = {c.joint for c in settings.couplings} | {c.follows for c in settings.couplings}
+        self._plain = frozenset(self._joints) - coupled
+        self._leaders: dict[str, list[CouplingSettings]] = {}
+        for coupling in settings.couplings:
+            self._leaders.setdefault(coupling.joint, []).append(coupling)
 
     @property
     def speed_scale(self) -> float:
@@ -337,7 +349,9 @@ class Joints:
         Each joint's goal is clamped to its range (logged), and moves from its last
         goal by at most its speed limit times the time since that goal was written
         (at most `period`: a late step does not catch up; after a move, from the
-        move's last goal). One packet per bus, no waiting beyond it. Joints whose
+        move's last goal). A goal the servo would not notice (the same raw count as
+        the last one) is not sent, and the last goal stays: packets only for change.
+        One packet per bus, no waiting beyond it. Joints whose
         torque is off (teaching) are left alone, and so are the joints a move,
         set_compliant or rest holds (their goals are dropped: the claim owns them);
         the others go out at once. `sources` names each joint's layer in the goals
@@ -362,12 +376,10 @@ class Joints:
                 start = joint.commanded
                 if joint.name in claimed or joint.torque is not True or start is None:
                     continue
-                target = self._clamped(joint, pose[joint.name])
-                elapsed = period if joint.sent_at is None else max(0.0, now - joint.sent_at)
-                reach = self._limit(joint) * min(period, elapsed)
-                goal = max(start - reach, min(start + reach, target))
-                if goal == start and joint.sent_at is not None:
-                    continue  # nothing to change: no packet for a joint at rest
+                goal = self._stream_goal(joint, start, self._clamped(joint, pose[joint.name]),
+                                         now, period)
+                if goal is None:
+                    continue
                 joint.commanded = goal
                 joint.sent_at = now
                 goals[joint.servo_id] = (joint.to_raw(goal), self._limit(joint))
@@ -382,8 +394,68 @@ class Joints:
                 )
         return self._own_values(sent)
 
-    def _realise(self, pose: Pose) -> dict[str, float]:
-        """`pose` as the real joints' goals (virtual joints expanded, followers moved)."""
+    def _stream_goal(
+        self, joint: _Joint, start: float, target: float, now: float, period: float
+    ) -> float | None:
+        """The goal a stream step at `now` sends `joint` (last goal `start`) toward `target`;
+        None when it would not change the servo's count: nothing is sent and nothing changes.
+
+        The step is at most the joint's speed limit times the time since its last goal,
+        but never more than a period's worth (a late loop does not catch up), nor less
+        than one count (so a joint slower than a count a period still moves, at its limit).
+        """
+        limit = self._limit(joint)
+        if joint.sent_at is None:  # never written: what the servo holds is not known
+            return max(start - limit * period, min(start + limit * period, target))
+        count_s = joint.servo.degrees_per_unit / limit
+        reach = limit * min(max(0.0, now - joint.sent_at), max(period, count_s))
+        goal = max(start - reach, min(start + reach, target))
+        if joint.to_raw(goal) == joint.to_raw(start):
+            return None  # the servo would do nothing with it: no packet, the goal unchanged
+        return goal
+
+    def sends(self, pose: Pose, at: float, period: float) -> bool:
+        """Whether stream(pose, period) at `at` would send any servo a new count (True while
+        a fault is latched: stream would raise). Nothing is sent or changed: a loop asks it
+        to rest through the steps that would change nothing a servo does."""
+        if self._faults:
+            return True
+        try:
+            pose = self._realise(pose, dict(self._own))
+        except (UnknownJoint, UnsafeCommand):
+            return True
+        claimed = self._claims.held()
+        for name, degrees in pose.items():
+            joint = self._joints[name]
+            start = joint.commanded
+            if name in claimed or joint.torque is not True or start is None:
+                continue
+            if not math.isfinite(degrees):
+                return True
+            if self._stream_goal(joint, start, joint.clamp(degrees), at, period) is not None:
+                return True
+        return False
+
+    def count_of(self, joint: str, degrees: float) -> int:
+        """The raw count `joint`'s servo would be sent for `degrees` as its own value (a
+        follower's leader's share added, as the leader stands), clamped to its range."""
+        for coupling in self._leaders.get(joint, ()):
+            leader = self._joints[coupling.follows]
+            lead = leader.commanded if leader.commanded is not None else leader.settings.rest_deg
+            degrees += coupling.ratio * (lead - leader.settings.rest_deg)
+        return self._joints[joint].to_raw(degrees)
+
+    def speed_limit(self, joint: str) -> float:
+        """`joint`'s speed limit now, degrees per second (the session's scale applied)."""
+        return self._limit(self._joints[joint])
+
+    def _realise(self, pose: Pose, own: dict[str, float] | None = None) -> dict[str, float]:
+        """`pose` as the real joints' goals (virtual joints expanded, followers moved); each
+        follower's own value is kept in `own` (the joints' own record when None)."""
+        if own is None:
+            own = self._own
+        if self._plain.issuperset(pose):
+            return dict(pose)
         virtual = self.settings.virtual
         unknown = [name for name in pose if name not in self._joints and name not in virtual]
         if unknown:
@@ -401,31 +473,35 @@ class Joints:
             if coupling.joint in expanded:
                 # Its own value, as asked (within its range): what it keeps when only its
                 # leader moves, and what commanded() gives.
-                self._own[coupling.joint] = self._joints[coupling.joint].clamp(
+                own[coupling.joint] = self._joints[coupling.joint].clamp(
                     expanded[coupling.joint])
         where = self._own_values(
-            {n: j.commanded for n, j in self._joints.items() if j.commanded is not None}
+            {n: j.commanded for n, j in self._joints.items() if j.commanded is not None}, own
         )
         for coupling in self.settings.couplings:
             if coupling.follows in expanded and coupling.joint in where:
                 # From here on its own value is kept, not re-read through a clamped goal.
-                self._own.setdefault(coupling.joint, where[coupling.joint])
+                own.setdefault(coupling.joint, where[coupling.joint])
         return self.settings.realise(pose, where)
 
-    def _own_values(self, goals: dict[str, float]) -> dict[str, float]:
-        """`goals` with each follower's own value (its goal without its leader's share)."""
+    def _own_values(
+        self, goals: dict[str, float], own: Mapping[str, float] | None = None
+    ) -> dict[str, float]:
+        """`goals` with each follower's own value (its goal without its leader's share), as
+        `own` records them (the joints' own record when None)."""
+        owned = self._own if own is None else own
         for coupling in self.settings.couplings:
             if coupling.joint not in goals:
                 continue
-            own = self._own.get(coupling.joint)
-            if own is None:
+            own_value = owned.get(coupling.joint)
+            if own_value is None:
                 # Never asked: what it was found at, less its leader's share.
                 leader = self._joints[coupling.follows]
                 if leader.commanded is None:
                     continue
-                own = goals[coupling.joint] - coupling.ratio * (
+                own_value = goals[coupling.joint] - coupling.ratio * (
                     leader.commanded - leader.settings.rest_deg)
-            goals[coupling.joint] = own
+            goals[coupling.joint] = own_value
         return goals
 
     async def set_compliant(self, group: str, compliant: bool) -> None:
@@ -492,8 +568,10 @@ class Joints:
             self._tell(self.clock.now(), {j.name: j.present for j in members
                                           if j.present is not None}, None, TORQUE_ON)
         await self._torque(joints, True)
+        held_at = self.clock.now()
         for joint in joints:
             joint.commanded = joint.present
+            joint.sent_at = held_at  # the hold is a goal: a stream step counts from it
         edging = [j for j in joints if self._outside_by(j) > 0]
         if edging:
             # Into range at each joint's own speed limit, not in one control step.

@@ -24,14 +24,27 @@ on (the mouth says the line while the arm points). Each goal is named by the lay
 that won its joint (gaze, idle, blink, mouth, gesture:<behaviour>, home). A fault,
 a pause or a stop calls cancel(): every layer ends at once and nothing more is sent
 until the game asks again.
+
+The body rests whenever it can. A goal that would not change a servo's count is not
+sent (the joints layer's stream), and the loop does not even wake for the ticks that
+would send nothing: after each step it looks ahead, tick by tick on the same schedule,
+at what the layers would ask (a pure peek: blinks and idle movements are planned whole
+when they begin, the mouth's levels are known once the voice hands them over), and
+sleeps to the first tick that would change a count or the body's own state (a layer
+beginning or ending, life due, the game moving a joint). Anything the game asks wakes
+it at the next tick. The servos receive the same goals at the same moments as a loop
+that computes every tick (`rests = False`, tests/test_body_rest.py), for a fraction of
+the work: on the robot, the battery's; in simulated time, whole games.
 """
 
 from __future__ import annotations
 
 import asyncio
+import bisect
 import contextlib
+import math
 import random
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,7 +52,7 @@ import structlog
 
 from hal.clock import Alarm, Clock
 from hal.errors import HalError
-from hal.servos.api import Fault, ServoApi
+from hal.servos.api import Fault, Goal, ServoApi
 from hal.servos.settings import ServoSettings
 from kasparctl.body.api import Gaze, GazeKind
 from kasparctl.body.behaviours import Behaviour, in_real_joints, minimum_jerk
@@ -50,9 +63,19 @@ log = structlog.get_logger("kasparctl.body")
 
 # Seconds a gaze shift takes (slower if a joint's speed limit says so).
 GAZE_MOVE_S = 0.6
-# Closer than this to home is home; a joint left away goes this share of the way each tick.
+# A joint further than this from where the body last sent it was moved by someone else.
 HOME_EPSILON_DEG = 0.05
+# A joint left away from home goes this share of the way each tick (within its count: home).
 HOME_PULL = 0.2
+# Ticks looked ahead at once before sleeping to the last of them and looking further: a
+# bounded piece of arithmetic on the event loop (a fraction of a millisecond).
+LOOKAHEAD_TICKS = 25
+# A tick runs this long after its moment: after anything else due then (a line begun, a
+# move ended), whichever was scheduled first, so a resting loop and a ticking one see the
+# game's news at the same tick.
+TIE_S = 1e-9
+# News this close to a tick's moment came at that moment (floating point's sums differ).
+SAME_MOMENT_S = 1e-7
 BLINK = "blink"
 IDLE = "idle"
 # The layers, as each goal's source names them (a gesture's adds the behaviour's name).
@@ -62,6 +85,8 @@ BLINK_LAYER = "blink"
 MOUTH_LAYER = "mouth"
 GESTURE_LAYER = "gesture"
 HOME_LAYER = "home"
+OWN_LAYERS = frozenset({GAZE_LAYER, IDLE_LAYER, BLINK_LAYER, MOUTH_LAYER, GESTURE_LAYER,
+                        HOME_LAYER})
 
 
 @dataclass(eq=False)
@@ -74,10 +99,75 @@ class _Playback:
     done: asyncio.Future[None] | None = None
     started: float | None = None
     base: dict[str, float] = field(default_factory=dict)
+    # The whole trajectory, planned at its first tick: the offsets at each tick from there.
+    plan: list[dict[str, float]] = field(default_factory=list)
+    period: float = 0.0
+    # The ticks (from its first) at which one of its joints' servo counts changes, when
+    # played alone over still joints (None: not foreseen so, the loop looks tick by tick).
+    changes: list[int] | None = None
+
+    def begin(self, now: float, base: dict[str, float], period: float) -> None:
+        """Its first tick, at `now`: offsets from `base`, every tick's planned at once."""
+        self.started = now
+        self.base = base
+        self.period = period
+        ticks = math.ceil(self.behaviour.duration / period - 1e-9) + 1
+        self.plan = [self.behaviour.offsets(k * period, self.strength) for k in range(ticks)]
+
+    def offsets(self, now: float) -> dict[str, float]:
+        """Each joint's offset at `now`: planned at the loop's ticks, else (a late tick on the
+        robot, a test's own moment) the curve evaluated there."""
+        assert self.started is not None
+        elapsed = now - self.started
+        index = round(elapsed / self.period)
+        if 0 <= index < len(self.plan) and abs(index * self.period - elapsed) < 1e-7:
+            return self.plan[index]
+        return self.behaviour.offsets(elapsed, self.strength)
+
+    def foresee(
+        self, counter: Callable[[str], Callable[[float], int]],
+        within: Callable[[str, float], float], reach: Callable[[str], float],
+    ) -> None:
+        """Plan the ticks at which a servo count changes, if its goals are its own: from its
+        base, each tick's step within its joint's reach (nothing slewed behind the plan).
+        `counter(joint)` gives the joint's degrees-to-count function."""
+        assert self.started is not None
+        base = self.base
+        counts = {joint: counter(joint) for joint in base}
+        last = {joint: counts[joint](within(joint, value)) for joint, value in base.items()}
+        before = dict(base)
+        changes = []
+        for index, offsets in enumerate(self.plan):
+            changed = False
+            for joint, offset in offsets.items():
+                if joint not in base:
+                    continue
+                value = within(joint, base[joint] + offset)
+                if abs(value - before[joint]) > reach(joint):
+                    return  # faster than its limit somewhere: the stream would lag the plan
+                before[joint] = value
+                count = counts[joint](value)
+                if count != last[joint]:
+                    last[joint] = count
+                    changed = True
+            if changed:
+                changes.append(index)
+        self.changes = changes
+
+    def next_change(self, index: int) -> int | None:
+        """The first planned tick after `index` (from its first) with a change, if any."""
+        assert self.changes is not None
+        at = bisect.bisect_right(self.changes, index)
+        return self.changes[at] if at < len(self.changes) else None
 
     def finish(self) -> None:
         if self.done is not None and not self.done.done():
             self.done.set_result(None)
+
+
+class _MustStep(Exception):
+    """A look ahead met a tick that changes the body's own state (a layer begins or ends,
+    life is due, the game moved a joint): the loop steps there."""
 
 
 @dataclass
@@ -121,6 +211,8 @@ class LiveBody:
         # A behaviour played near a joint's limit is squashed against it here, quietly: the
         # joints layer would clamp it too, but warns of every goal it clamps.
         self._ranges = {j.name: j.range_deg for j in servo_settings.joints}
+        self._joint_settings = {j.name: j for j in servo_settings.joints}
+        self._coupled = {c.joint for c in servo_settings.couplings}
         mouth = settings.mouth_joint
         self._mouth_joint = mouth if mouth and mouth in self._present else None
         self._mouth_closed = rests.get(mouth, 0.0)
@@ -151,8 +243,16 @@ class LiveBody:
         self.layers: dict[str, str] = {}
         # Set to a list to collect each tick's lateness in seconds (bench/bench_body_loop.py).
         self.lateness: list[float] | None = None
+        # False: compute and stream every tick (the reference the resting loop must equal).
+        self.rests = True
+        # Each home's raw count, as the servo would be sent it (a joint within it is home).
+        self._home_counts: dict[str, int] = {}
+        # Each joint's last position found within its home's count.
+        self._found_home: dict[str, float] = {}
         # A latched fault ends every behaviour at once, loop running or not.
         servos.on_fault(self._on_fault)
+        # A goal of the game's (a move, torque on, rest) wakes a resting loop at once.
+        servos.on_goals(self._on_goal)
 
     # --- the Body interface -------------------------------------------------------------
 
@@ -166,6 +266,7 @@ class LiveBody:
         """Cancel everything and stop the loop; idempotent."""
         self.cancel()
         self._servos.off_fault(self._on_fault)
+        self._servos.off_goals(self._on_goal)
         task, self._task = self._task, None
         if task is not None:
             task.cancel()
@@ -187,8 +288,7 @@ class LiveBody:
             self._idle = self._next_idle = None
         if not self._blinking:
             self._blink = self._next_blink = None
-        if self._blinking:
-            self._poke()
+        self._poke()
 
     def look_at(self, gaze: Gaze) -> None:
         """Turn head and eyes to the configured pose for `gaze`, when alive; returns at once."""
@@ -238,30 +338,117 @@ class LiveBody:
         self.mouth.silence()
         # Every joint is home where it stands: not even the way home is sent after a cancel.
         self._home.clear()
+        self._home_counts.clear()
+        self._found_home.clear()
         self._sent.clear()
+        self._poke()
 
     # --- the loop -----------------------------------------------------------------------
 
     async def _run(self) -> None:
+        period = self.period
         begin = self._clock.now()
-        tick = 0
+        stepped = 0  # the last tick stepped, counted from `begin`
+        next_tick = 1  # the tick the loop wakes at
+        looking = False  # woken there only to look further ahead (nothing is sent there)
         while True:
-            tick += 1
-            due = begin + tick * self.period
-            if due - self._clock.now() < -self.period:  # far behind: start again, no burst
-                begin, tick = self._clock.now(), 0
+            due = begin + next_tick * period
+            if due - self._clock.now() < -period:  # far behind: start again, no burst
+                begin, stepped, next_tick, looking = self._clock.now(), 0, 0, False
                 due = begin
-            await self._alarm.sleep_until(due)
+            if await self._alarm.sleep_until(due + TIE_S):
+                next_tick, looking = self._tick_for_news(begin, stepped), False
+                continue
+            if looking:
+                next_tick, looking = self._plan_rest(begin, next_tick, self._servos.commanded())
+                continue
             now = self._clock.now()
             if self.lateness is not None:
                 self.lateness.append(now - due)
             sent = await self.step(now)
+            stepped = next_tick
             if not sent and self.quiet():
                 # Nothing moves: no goal to send until a layer has something to do. The
                 # joints layer holds every goal meanwhile; waking costs nothing on the
                 # robot and keeps whole games in simulated time as fast as without a body.
                 await self._rest_until(self._next_life())
-                begin, tick = self._clock.now(), 0
+                begin, stepped, next_tick, looking = self._clock.now(), 0, 1, False
+            elif self.rests:
+                next_tick, looking = self._plan_rest(begin, stepped, self._servos.commanded())
+            else:
+                next_tick = stepped + 1
+
+    def _tick_for_news(self, begin: float, stepped: int) -> int:
+        """The tick that sees what was just asked: the next one, or the one of this very
+        moment (stepped again if it has run). In simulated time the game's news often comes
+        at a tick's own moment (its timers began at a tick: a gesture's end); which of the
+        two then runs first is the event loop's choice, so the news is seen at that tick
+        either way, by the resting loop and the ticking one alike."""
+        ticks = (self._clock.now() - TIE_S - begin) / self.period
+        nearest = round(ticks)
+        if abs(ticks - nearest) * self.period < SAME_MOMENT_S and nearest >= stepped:
+            return nearest
+        return max(stepped + 1, math.floor(ticks) + 1)
+
+    def _plan_rest(self, begin: float, tick: int, held: Mapping[str, float]) -> tuple[int, bool]:
+        """The tick to wake at after `tick`, skipping those that would send nothing and change
+        nothing, and whether it is only to look further (nothing to send as far as looked)."""
+        foreseen = self._foreseen_step(begin, tick, held)
+        if foreseen is not None:
+            return foreseen, False  # life alone, planned whole: no tick looked at
+        index = tick
+        for _ in range(LOOKAHEAD_TICKS):
+            if self._must_step(begin + (index + 1) * self.period + TIE_S, held):
+                return index + 1, False
+            index += 1
+        return index, True
+
+    def _foreseen_step(self, begin: float, tick: int, held: Mapping[str, float]) -> int | None:
+        """The next tick that steps, when only blinks and idle movements play (each over
+        joints of its own, every other joint home) and both were foreseen whole; else None
+        (the loop looks ahead tick by tick)."""
+        if self._gesture is not None or self.mouth.claimed or self._moved_by_others(held):
+            return None
+        if self._gaze is not None and not self._gaze.settled:
+            return None
+        playing = [p for p in (self._idle, self._blink) if p is not None]
+        claimed: set[str] = set()
+        for playback in playing:
+            if playback.changes is None or claimed & playback.base.keys():
+                return None
+            claimed |= playback.base.keys()
+        for joint in self._home:
+            if joint not in claimed and joint in held and not self._is_home(joint, held[joint]):
+                return None  # on its way home: tick by tick
+        period = self.period
+        candidates = []
+        for playback in playing:
+            assert playback.started is not None and playback.changes is not None
+            first = round((playback.started - begin) / period)
+            change = playback.next_change(tick - first)
+            if change is not None:
+                candidates.append(first + change)
+            # Its end (the tick its last offsets are sent and it finishes).
+            candidates.append(first + math.ceil(playback.behaviour.duration / period - 1e-9))
+        for due, allowed in ((self._next_blink, self._blinking), (self._next_idle, self._alive)):
+            if allowed:
+                if due is None:
+                    return None  # drawn at the next tick
+                candidates.append(math.ceil((due - TIE_S - begin) / period - 1e-9))
+        if not candidates:
+            return None
+        return max(tick + 1, min(candidates))
+
+    def _must_step(self, moment: float, held: Mapping[str, float]) -> bool:
+        """Whether the tick at `moment` would send a servo a new count or change the body's
+        state; nothing is changed."""
+        try:
+            pose = self._compose(moment, held, peek=True)
+        except _MustStep:
+            return True
+        if not pose and self.quiet():
+            return True  # the loop's own rest begins there
+        return self._servos.sends(pose, moment, self.period)
 
     def quiet(self) -> bool:
         """Whether no layer has anything to send (blinks and idle may still be scheduled)."""
@@ -297,6 +484,7 @@ class LiveBody:
 
     def _poke(self) -> None:
         self._wake.set()
+        self._alarm.interrupt()
 
     async def step(self, now: float) -> dict[str, float]:
         """One tick: blend the layers for `now` and send the goals; the goals sent."""
@@ -317,47 +505,115 @@ class LiveBody:
 
     def compose(self, now: float) -> dict[str, float]:
         """The blended target of every claimed joint at `now` (layers by priority)."""
-        held = self._servos.commanded()
-        self._learn_home(held)
+        return self._compose(now, self._servos.commanded(), peek=False)
+
+    def _compose(
+        self, now: float, held: Mapping[str, float], *, peek: bool
+    ) -> dict[str, float]:
+        """compose() at `now` with the joints held at `held`. `peek`: change nothing, and
+        raise _MustStep where the tick would change the body's state (one code path for
+        the step and the look ahead, so the two cannot disagree)."""
+        if peek:
+            if self._moved_by_others(held):
+                raise _MustStep
+        else:
+            self._learn_home(held)
         home = self._home
         out: dict[str, float] = {}
-        layers = self.layers
-        layers.clear()
-        self._gaze_layer(now, held, out)
+        layers: dict[str, str] = {}
+        self._gaze_layer(now, held, out, layers, peek)
         if self._blinking:
-            self._schedule_life(now)
+            self._schedule_life(now, peek)
             if self._idle is not None:
-                self._idle = self._additive(self._idle, now, home, out)
+                idle = self._additive(self._idle, now, home, out, layers, peek)
+                if not peek:
+                    self._idle = idle
             if self._blink is not None:
-                self._blink = self._relative(self._blink, now, home, out)
+                blink = self._relative(self._blink, now, home, out, layers, peek)
+                if not peek:
+                    self._blink = blink
         if self._mouth_joint is not None and self._mouth_joint in held:
-            opening = self.mouth.opening(now)
+            if peek and self.mouth.ends_by(now):
+                raise _MustStep
+            opening = self.mouth.level_at(now) if peek else self.mouth.opening(now)
             if opening is not None:
                 span = self._settings.mouth_open_deg
                 out[self._mouth_joint] = self._mouth_closed + opening * span
                 layers[self._mouth_joint] = MOUTH_LAYER
         if self._gesture is not None:
-            self._gesture = self._relative(self._gesture, now, home, out)
+            gesture = self._relative(self._gesture, now, home, out, layers, peek)
+            if not peek:
+                self._gesture = gesture
+        found = self._found_home
         for joint, rest in home.items():
-            # A joint a behaviour left away from home (cut short) goes back to it gently.
+            # A joint a behaviour left away from home (cut short) goes back to it gently,
+            # and the last counts of the way at once (a pull shorter than a count is never
+            # sent, so it would never arrive).
             now_at = held.get(joint)
-            if now_at is not None and joint not in out and abs(now_at - rest) > HOME_EPSILON_DEG:
-                out[joint] = now_at + (rest - now_at) * HOME_PULL
-                layers[joint] = HOME_LAYER
+            if now_at is None or now_at == rest or found.get(joint) == now_at or joint in out:
+                continue
+            if self._is_home(joint, now_at):
+                continue
+            pulled = now_at + (rest - now_at) * HOME_PULL
+            if self._servos.count_of(joint, pulled) == self._servos.count_of(joint, now_at):
+                pulled = rest
+            out[joint] = pulled
+            layers[joint] = HOME_LAYER
+        if not peek:
+            self.layers = layers
         return {
             joint: self._within(joint, value) for joint, value in out.items() if joint in held
         }
 
+    def _counter(self, joint: str) -> Callable[[float], int]:
+        """`joint`'s degrees (in its range) to the count its servo is sent: the servo model's
+        own arithmetic for a joint of its own, the joints layer's for a coupled one."""
+        settings = self._joint_settings.get(joint)
+        if settings is None or joint in self._coupled:
+            return lambda degrees: self._servos.count_of(joint, degrees)
+        model, direction, offset = settings.servo, settings.direction, settings.offset_deg
+        return lambda degrees: model.to_raw(degrees, direction, offset)
+
+    def _reach(self, joint: str) -> float:
+        """How far `joint` may go in one tick at its speed limit."""
+        return self._servos.speed_limit(joint) * self.period
+
     def _within(self, joint: str, degrees: float) -> float:
         low, high = self._ranges.get(joint, (degrees, degrees))
         return min(max(degrees, low), high)
+
+    def _is_home(self, joint: str, degrees: float) -> bool:
+        """Whether `degrees` is `joint`'s home: the same count as the servo would be sent."""
+        if degrees == self._home[joint] or self._found_home.get(joint) == degrees:
+            return True
+        count = self._home_counts.get(joint)
+        if count is None:
+            count = self._home_counts[joint] = self._servos.count_of(joint, self._home[joint])
+        if self._servos.count_of(joint, degrees) != count:
+            return False
+        self._found_home[joint] = degrees  # asked again every tick while it stays there
+        return True
+
+    def _set_home(self, joint: str, degrees: float) -> None:
+        self._home[joint] = degrees
+        self._home_counts.pop(joint, None)
+        self._found_home.pop(joint, None)
+
+    def _moved_by_others(self, held: Mapping[str, float]) -> bool:
+        """Whether a joint is not where the body last sent it (what _learn_home acts on)."""
+        sent = self._sent
+        for joint, value in held.items():
+            last = sent.get(joint)
+            if last is None or abs(value - last) > HOME_EPSILON_DEG:
+                return True
+        return False
 
     def _learn_home(self, held: Mapping[str, float]) -> None:
         """A joint not where the body last sent it was moved by someone else: its new home."""
         for joint, value in held.items():
             sent = self._sent.get(joint)
             if sent is None or abs(value - sent) > HOME_EPSILON_DEG:
-                self._home[joint] = value
+                self._set_home(joint, value)
                 self._sent[joint] = value
                 if sent is not None:
                     self._yield_joint(joint)
@@ -376,31 +632,47 @@ class LiveBody:
         """Whether a joint still has its way home to go."""
         held = self._servos.commanded()
         return any(
-            abs(held[joint] - rest) > HOME_EPSILON_DEG
-            for joint, rest in self._home.items()
-            if joint in held
+            not self._is_home(joint, held[joint]) for joint in self._home if joint in held
         )
 
-    def _schedule_life(self, now: float) -> None:
+    def _schedule_life(self, now: float, peek: bool) -> None:
         settings = self._settings
+        undrawn = self._next_blink is None or (self._next_idle is None and self._alive)
+        if undrawn and peek:
+            raise _MustStep
         if self._next_blink is None:
             self._next_blink = now + self._rng.uniform(*settings.blink_interval_s)
         if self._next_idle is None and self._alive:
             self._next_idle = now + self._rng.uniform(*settings.idle_interval_s)
-        if now >= self._next_blink:
+        blink_due = now >= self._next_blink
+        idle_due = self._next_idle is not None and now >= self._next_idle
+        if peek:
+            if blink_due or idle_due:
+                raise _MustStep
+            return
+        if blink_due:
             self._next_blink = None
             if self._blink is None and BLINK in self._library:
                 self._blink = _Playback(self._library[BLINK], 1.0, BLINK_LAYER)
-        if self._next_idle is not None and now >= self._next_idle:
+        if idle_due:
             self._next_idle = None
             if self._idle is None and IDLE in self._library and settings.idle_amplitude > 0:
                 self._idle = _Playback(self._library[IDLE], settings.idle_amplitude, IDLE_LAYER)
 
-    def _gaze_layer(self, now: float, held: Mapping[str, float], out: dict[str, float]) -> None:
+    def _gaze_layer(
+        self,
+        now: float,
+        held: Mapping[str, float],
+        out: dict[str, float],
+        layers: dict[str, str],
+        peek: bool,
+    ) -> None:
         move = self._gaze
         if move is None:
             return
         if move.began is None:
+            if peek:
+                raise _MustStep
             move.began = now
             move.start = {j: held[j] for j in move.target if j in held}
         if move.settled:
@@ -410,43 +682,78 @@ class LiveBody:
             start = move.start.get(joint)
             if start is not None:
                 out[joint] = start + (target - start) * fraction
-                self.layers[joint] = GAZE_LAYER
-        move.settled = now - move.began >= GAZE_MOVE_S
-        if move.settled:
-            self._home.update({j: v for j, v in move.target.items() if j in move.start})
+                layers[joint] = GAZE_LAYER
+        if now - move.began >= GAZE_MOVE_S:
+            if peek:
+                raise _MustStep
+            move.settled = True
+            for joint, target in move.target.items():
+                if joint in move.start:
+                    self._set_home(joint, target)
 
     def _additive(
-        self, playback: _Playback, now: float, held: Mapping[str, float], out: dict[str, float]
+        self,
+        playback: _Playback,
+        now: float,
+        held: Mapping[str, float],
+        out: dict[str, float],
+        layers: dict[str, str],
+        peek: bool,
     ) -> _Playback | None:
         """Offsets added to what the layers below want (else to where the joint was)."""
         if playback.started is None:
-            playback.started = now
-            playback.base = {j: held[j] for j in playback.behaviour.joints if j in held}
-        elapsed = now - playback.started
-        for joint, offset in playback.behaviour.offsets(elapsed, playback.strength).items():
-            if joint in playback.base:
-                out[joint] = out.get(joint, playback.base[joint]) + offset
-                self.layers[joint] = playback.layer
-        if elapsed >= playback.behaviour.duration:
-            playback.finish()
-            return None
-        return playback
+            if peek:
+                raise _MustStep
+            playback.begin(
+                now, {j: held[j] for j in playback.behaviour.joints if j in held}, self.period
+            )
+            if not out.keys() & playback.base.keys():  # over still joints: its own goals
+                playback.foresee(self._counter, self._within, self._reach)
+        return self._played(playback, now, out, layers, peek, additive=True)
 
     def _relative(
-        self, playback: _Playback, now: float, held: Mapping[str, float], out: dict[str, float]
+        self,
+        playback: _Playback,
+        now: float,
+        held: Mapping[str, float],
+        out: dict[str, float],
+        layers: dict[str, str],
+        peek: bool,
     ) -> _Playback | None:
         """Offsets from where each joint was (or was wanted) at the first tick; overrides."""
         if playback.started is None:
-            playback.started = now
-            playback.base = {
-                j: out.get(j, held[j]) for j in playback.behaviour.joints if j in held
-            }
-        elapsed = now - playback.started
-        for joint, offset in playback.behaviour.offsets(elapsed, playback.strength).items():
-            if joint in playback.base:
-                out[joint] = playback.base[joint] + offset
-                self.layers[joint] = playback.layer
-        if elapsed >= playback.behaviour.duration:
+            if peek:
+                raise _MustStep
+            playback.begin(
+                now,
+                {j: out.get(j, held[j]) for j in playback.behaviour.joints if j in held},
+                self.period,
+            )
+            if playback.layer == BLINK_LAYER:
+                playback.foresee(self._counter, self._within, self._reach)
+        return self._played(playback, now, out, layers, peek, additive=False)
+
+    def _played(
+        self,
+        playback: _Playback,
+        now: float,
+        out: dict[str, float],
+        layers: dict[str, str],
+        peek: bool,
+        *,
+        additive: bool,
+    ) -> _Playback | None:
+        """Write `playback`'s goals at `now` into `out`; None once it has ended there."""
+        assert playback.started is not None
+        ends = now - playback.started >= playback.behaviour.duration
+        if ends and peek:
+            raise _MustStep
+        base = playback.base
+        for joint, offset in playback.offsets(now).items():
+            if joint in base:
+                out[joint] = (out.get(joint, base[joint]) if additive else base[joint]) + offset
+                layers[joint] = playback.layer
+        if ends:
             playback.finish()
             return None
         return playback
@@ -472,6 +779,11 @@ class LiveBody:
 
     def _on_fault(self, fault: Fault) -> None:
         self.cancel()
+
+    def _on_goal(self, goal: Goal) -> None:
+        # The body's own goals are named by its layers; any other is the game's.
+        if goal.source.split(":", 1)[0] not in OWN_LAYERS:
+            self._poke()
 
     def _note_once(self, behaviour: str, joint: str, message: str) -> None:
         if (behaviour, joint) not in self._noted:

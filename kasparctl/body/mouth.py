@@ -87,7 +87,8 @@ class Mouth:
         return self._until is not None
 
     def opening(self, now: float) -> float | None:
-        """How open (0 to 1) at `now`; None when no line is near (the mouth is not claimed)."""
+        """How open (0 to 1) at `now`; None when no line is near (the mouth is not claimed).
+        A moment past the line's end releases the mouth."""
         if self._until is None:
             return None
         if now > self._until:
@@ -96,6 +97,16 @@ class Mouth:
             self._levels.clear()
             return None
         self._forget_before(now - 1.0)
+        return self.level_at(now)
+
+    def ends_by(self, now: float) -> bool:
+        """Whether opening(now) would release the mouth (a line near, its end passed)."""
+        return self._until is not None and now > self._until
+
+    def level_at(self, now: float) -> float | None:
+        """opening(now) without changing anything (a look ahead within the claim)."""
+        if self._until is None:
+            return None
         low = bisect.bisect_right(self._starts, now - self._window / 2) - 1
         high = bisect.bisect_left(self._starts, now + self._window / 2)
         chosen = [
