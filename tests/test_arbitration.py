@@ -153,8 +153,9 @@ def test_the_mouth_streams_while_the_arm_points_and_the_arm_obeys_only_the_move(
         assert end - begin == pytest.approx(1.6 - PERIOD)
         during = [g for g in goals if begin <= g.time <= end]
         mouth = [g.degrees for g in during if g.joint == "mouth_open"]
-        # The mouth moved all through the point (four openings a second), clamped.
-        assert len(mouth) >= 70
+        # The mouth moved all through the point (four openings a second), clamped: a goal
+        # at most ticks of the 1.6 s (those that round to the count held are not sent).
+        assert len(mouth) >= 60
         assert sum(abs(b - a) for a, b in itertools.pairwise(mouth)) > 150.0
         assert 10.0 < max(mouth) <= 15.0 and min(mouth) == pytest.approx(0.0, abs=0.5)
         assert {g.source for g in during if g.joint == "mouth_open"} == {"mouth"}

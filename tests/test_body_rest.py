@@ -60,6 +60,14 @@ def play_game(tmp_path: Path, variant: str, seed: int, rests: bool) -> tuple[lis
             return await real_step(now)
 
         body.step = counted  # type: ignore[method-assign]
+        real_light = body._light_step
+
+        async def counted_light(goals: dict[str, float]) -> dict[str, float]:
+            nonlocal steps
+            steps += 1
+            return await real_light(goals)
+
+        body._light_step = counted_light  # type: ignore[method-assign]
         rig.servos.on_goals(lambda goal: goals.append(_goal_row(goal)))
         result = await rig.run()
         assert result.finished
@@ -103,6 +111,14 @@ async def _alive_for(seconds: float, rests: bool) -> tuple[list[tuple], int]:
         return await real_step(now)
 
     body.step = counted  # type: ignore[method-assign]
+    real_light = body._light_step
+
+    async def counted_light(goals: dict[str, float]) -> dict[str, float]:
+        nonlocal steps
+        steps += 1
+        return await real_light(goals)
+
+    body._light_step = counted_light  # type: ignore[method-assign]
     await body.start()
     body.set_alive(True)
     await asyncio.sleep(seconds / 2)

@@ -105,6 +105,8 @@ class _Playback:
     # The ticks (from its first) at which one of its joints' servo counts changes, when
     # played alone over still joints (None: not foreseen so, the loop looks tick by tick).
     changes: list[int] | None = None
+    # At each of those ticks, the goals of the joints whose count changes there.
+    change_goals: dict[int, dict[str, float]] = field(default_factory=dict)
 
     def begin(self, now: float, base: dict[str, float], period: float) -> None:
         """Its first tick, at `now`: offsets from `base`, every tick's planned at once."""
@@ -137,8 +139,9 @@ class _Playback:
         last = {joint: counts[joint](within(joint, value)) for joint, value in base.items()}
         before = dict(base)
         changes = []
+        goals: dict[int, dict[str, float]] = {}
         for index, offsets in enumerate(self.plan):
-            changed = False
+            changed: dict[str, float] = {}
             for joint, offset in offsets.items():
                 if joint not in base:
                     continue
@@ -149,10 +152,12 @@ class _Playback:
                 count = counts[joint](value)
                 if count != last[joint]:
                     last[joint] = count
-                    changed = True
+                    changed[joint] = value
             if changed:
                 changes.append(index)
+                goals[index] = changed
         self.changes = changes
+        self.change_goals = goals
 
     def next_change(self, index: int) -> int | None:
         """The first planned tick after `index` (from its first) with a change, if any."""
@@ -245,6 +250,10 @@ class LiveBody:
         self.lateness: list[float] | None = None
         # False: compute and stream every tick (the reference the resting loop must equal).
         self.rests = True
+        # The goals of the next tick when only planned life changes counts there (a light
+        # step), and the layer of each.
+        self._light: dict[str, float] | None = None
+        self._light_layers: dict[str, str] = {}
         # Each home's raw count, as the servo would be sent it (a joint within it is home).
         self._home_counts: dict[str, int] = {}
         # Each joint's last position found within its home's count.
@@ -357,7 +366,7 @@ class LiveBody:
                 begin, stepped, next_tick, looking = self._clock.now(), 0, 0, False
                 due = begin
             if await self._alarm.sleep_until(due + TIE_S):
-                next_tick, looking = self._tick_for_news(begin, stepped), False
+                next_tick, looking, self._light = self._tick_for_news(begin, stepped), False, None
                 continue
             if looking:
                 next_tick, looking = self._plan_rest(begin, next_tick, self._servos.commanded())
@@ -365,7 +374,10 @@ class LiveBody:
             now = self._clock.now()
             if self.lateness is not None:
                 self.lateness.append(now - due)
-            sent = await self.step(now)
+            if self._light is not None:
+                sent = await self._light_step(self._light)
+            else:
+                sent = await self.step(now)
             stepped = next_tick
             if not sent and self.quiet():
                 # Nothing moves: no goal to send until a layer has something to do. The
@@ -392,7 +404,10 @@ class LiveBody:
 
     def _plan_rest(self, begin: float, tick: int, held: Mapping[str, float]) -> tuple[int, bool]:
         """The tick to wake at after `tick`, skipping those that would send nothing and change
-        nothing, and whether it is only to look further (nothing to send as far as looked)."""
+        nothing, and whether it is only to look further (nothing to send as far as looked).
+        Sets `_light` when that tick only changes counts of planned life."""
+        self._light = None
+        self._light_layers.clear()
         foreseen = self._foreseen_step(begin, tick, held)
         if foreseen is not None:
             return foreseen, False  # life alone, planned whole: no tick looked at
@@ -421,23 +436,37 @@ class LiveBody:
             if joint not in claimed and joint in held and not self._is_home(joint, held[joint]):
                 return None  # on its way home: tick by tick
         period = self.period
-        candidates = []
+        changes: list[tuple[int, _Playback, int]] = []
+        events = []  # ticks that change the body's state: a full step
         for playback in playing:
             assert playback.started is not None and playback.changes is not None
             first = round((playback.started - begin) / period)
             change = playback.next_change(tick - first)
             if change is not None:
-                candidates.append(first + change)
+                changes.append((first + change, playback, change))
             # Its end (the tick its last offsets are sent and it finishes).
-            candidates.append(first + math.ceil(playback.behaviour.duration / period - 1e-9))
+            events.append(first + math.ceil(playback.behaviour.duration / period - 1e-9))
         for due, allowed in ((self._next_blink, self._blinking), (self._next_idle, self._alive)):
             if allowed:
                 if due is None:
                     return None  # drawn at the next tick
-                candidates.append(math.ceil((due - TIE_S - begin) / period - 1e-9))
-        if not candidates:
+                events.append(math.ceil((due - TIE_S - begin) / period - 1e-9))
+        if not changes and not events:
             return None
-        return max(tick + 1, min(candidates))
+        at = max(tick + 1, min([c for c, _, _ in changes] + events))
+        if not events or min(events) > at:
+            # Only counts change there: the light step sends those joints' planned goals
+            # (the packets a whole step would send), by the layer that plays each.
+            light: dict[str, float] = {}
+            for moment, playback, change in changes:
+                if moment == at:
+                    for joint, value in playback.change_goals[change].items():
+                        if joint in playback.base:  # not one the game has taken since
+                            light[joint] = value
+                            self._light_layers[joint] = playback.layer
+            if light:
+                self._light = light
+        return at
 
     def _must_step(self, moment: float, held: Mapping[str, float]) -> bool:
         """Whether the tick at `moment` would send a servo a new count or change the body's
@@ -485,6 +514,21 @@ class LiveBody:
     def _poke(self) -> None:
         self._wake.set()
         self._alarm.interrupt()
+
+    async def _light_step(self, goals: dict[str, float]) -> dict[str, float]:
+        """A step at a tick where only planned life changes counts: those joints' goals,
+        without composing every layer again (what a whole step would send there)."""
+        try:
+            sent = await self._servos.stream(goals, self.period, dict(self._light_layers))
+        except HalError as error:
+            if not self._fault_seen:
+                log.warning("body paused: the servos refuse motion", error=str(error))
+                self._fault_seen = True
+            self.cancel()
+            return {}
+        self._fault_seen = False
+        self._sent.update(sent)
+        return sent
 
     async def step(self, now: float) -> dict[str, float]:
         """One tick: blend the layers for `now` and send the goals; the goals sent."""
