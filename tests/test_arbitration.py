@@ -159,7 +159,8 @@ def test_the_mouth_streams_while_the_arm_points_and_the_arm_obeys_only_the_move(
         assert sum(abs(b - a) for a, b in itertools.pairwise(mouth)) > 150.0
         assert 10.0 < max(mouth) <= 15.0 and min(mouth) == pytest.approx(0.0, abs=0.5)
         assert {g.source for g in during if g.joint == "mouth_open"} == {"mouth"}
-        assert sum(g.joint == "left_eyelid" for g in during) >= 50
+        # The eyelid moves half the time (a rectified sine): a goal at each count it changes.
+        assert sum(g.joint == "left_eyelid" for g in during) >= 40
         # The arm's goals during the point are the point's alone: never the stream's.
         assert {g.source for g in during if g.joint in ARM} == {"point"}
         # On the wire, in the order the servo took them (a jog has no reply: the emulator's
