@@ -5,12 +5,17 @@ Run on demand: .venv/bin/python bench/bench_report.py [--sessions N] [--games N]
                  [--against CHECKOUT] [--workers N]
 Figures: the whole report (read every session, the paper's statistics per condition,
 intervals and contrasts, every figure as 300-dpi PNG and PDF, summary.md and .json,
-children.csv) in a child process: its wall time (target < 15 s) and its peak RSS (target
-< 300 MB), the sum over the report's process and the workers drawing its figures. The
-machine is shared, so a baseline is timed in the same run (the CSV export of the same
-sessions, which reads every record and draws nothing) and the report is also given as a
-ratio to it. --profile FILE writes a cProfile of one more report run and
-prints what dominates.
+children.csv) in a child process: its wall time (target < 15 s), its CPU seconds, and its
+peak RSS (target < 300 MB), the sum over the report's process and the workers drawing its
+figures. The machine is shared, so a baseline is timed in the same run (the CSV export of
+the same sessions, which reads every record and draws nothing) and the report is also
+given as a ratio to it; the CPU seconds are what the load moves least. --profile FILE
+writes a cProfile of one more report run and prints what dominates.
+
+Last measured (--games 144 --against a checkout of main at f351b14, load average 2.4 to
+3.5): 27.9 s, 24.1 s of CPU, 241 MB, against main's 49.7 s, 37.5 s of CPU, 236 MB (0.56 of
+its time, 0.64 of its CPU): the 15 s target is not met (docs/research-data.md, "Scale of a
+usual study", says what dominates).
 
 The sessions are real demo games in simulated time: three learner profiles x four
 uncertainty modes x both variants (24 conditions), three children a group with
@@ -177,12 +182,16 @@ def ensure_sessions(cache: Path, count: int, games: int, fresh: bool) -> None:
     print(f"made in {time.perf_counter() - started:.0f} s")
 
 
-# Runs one command and reports its own peak RSS (kB on Linux) as its last line on stderr.
+# Runs one command and reports its own peak RSS (kB on Linux) and the CPU seconds of it and
+# its workers as its last line on stderr.
 MEASURED = """
 import resource, sys
 from kasparctl.cli import main
 code = main(sys.argv[1:])
-print("maxrss", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)
+own = resource.getrusage(resource.RUSAGE_SELF)
+workers = resource.getrusage(resource.RUSAGE_CHILDREN)
+cpu = own.ru_utime + own.ru_stime + workers.ru_utime + workers.ru_stime
+print("maxrss", own.ru_maxrss, cpu, file=sys.stderr)
 sys.exit(code)
 """
 
@@ -224,11 +233,12 @@ def tree_rss(root: int) -> tuple[int, int]:
     return rss, pss
 
 
-def run(argv: list[str], code: Path | None = None) -> tuple[float, float, float]:
+def run(argv: list[str], code: Path | None = None) -> tuple[float, float, float, float]:
     """One kasparctl command in a child process: its wall time (s) and peak RSS (MB), the
     RSS of the command and of every worker process it starts, summed while they run
-    (sampled every 50 ms), or the command's own peak if that is higher; and the peak of
-    their PSS summed.
+    (sampled every 50 ms), or the command's own peak if that is higher; the peak of
+    their PSS summed; and the CPU seconds they used (on a shared box, what the load
+    does not move).
 
     `code`: a checkout of another version of kasparctl to run instead of this one."""
     environment = dict(os.environ)
@@ -260,8 +270,9 @@ def run(argv: list[str], code: Path | None = None) -> tuple[float, float, float]
     sampler.join()
     if child.returncode != 0:
         sys.exit(f"kasparctl {' '.join(argv)} failed with {child.returncode}:\n{stderr}")
-    own = int(stderr.strip().splitlines()[-1].split()[1]) * 1024
-    return elapsed, max(own, highest[0]) / 2**20, highest[1] / 2**20
+    _, maxrss, cpu = stderr.strip().splitlines()[-1].split()
+    own = int(maxrss) * 1024
+    return elapsed, max(own, highest[0]) / 2**20, highest[1] / 2**20, float(cpu)
 
 
 def profiled(argv: list[str], where: Path) -> None:
@@ -321,10 +332,12 @@ def bench() -> None:
             str(out / "report"),
         ]
         if arguments.against:
-            other_s, other_mb, _ = run([*report[:-1], str(out / "other")], arguments.against)
-        report_s, report_mb, report_pss = run(report)
+            other_s, other_mb, _, other_cpu = run(
+                [*report[:-1], str(out / "other")], arguments.against
+            )
+        report_s, report_mb, report_pss, report_cpu = run(report)
         export = ["export", "--state-dir", str(cache), "--csv", str(out / "trials.csv")]
-        export_s, _, _ = run(export)
+        export_s, _, _, _ = run(export)
         rows = (out / "trials.csv").read_text().count("\n") - 1
         figures = sorted(p.name for p in (out / "report").iterdir() if p.suffix == ".png")
         if arguments.keep:
@@ -334,15 +347,19 @@ def bench() -> None:
     time_verdict = "ok" if report_s < TARGET_S else "OVER TARGET"
     rss_verdict = "ok" if report_mb < TARGET_MB else "OVER TARGET"
     print(f"{arguments.sessions} sessions, {rows} trial rows, {len(figures)} PNG pages")
-    print(f"report: {report_s:.1f} s (target < {TARGET_S:.0f} s) {time_verdict}")
+    print(
+        f"report: {report_s:.1f} s (target < {TARGET_S:.0f} s) {time_verdict}; "
+        f"{report_cpu:.1f} s of CPU"
+    )
     print(
         f"report peak RSS, its processes summed: {report_mb:.0f} MB "
         f"(target < {TARGET_MB:.0f} MB) {rss_verdict}; peak PSS summed {report_pss:.0f} MB"
     )
     if arguments.against:
         print(
-            f"the same report by {arguments.against}: {other_s:.1f} s, peak RSS {other_mb:.0f} MB; "
-            f"this one takes {report_s / other_s:.2f} of its time"
+            f"the same report by {arguments.against}: {other_s:.1f} s ({other_cpu:.1f} s of CPU), "
+            f"peak RSS {other_mb:.0f} MB; this one takes {report_s / other_s:.2f} of its time "
+            f"and {report_cpu / other_cpu:.2f} of its CPU"
         )
     print(
         f"baseline, the trials export of the same sessions: {export_s:.1f} s; "

@@ -331,11 +331,18 @@ def test_a_contrast_without_an_interval_does_not_look_precise() -> None:
     found = [contrast(i, interval=i % 2 == 0) for i in range(6)]
     figure = first(FigureData([], {}, BANDS, contrasts=found), "contrasts")
     axes = figure.axes[0]
-    hollow = [line for line in axes.get_lines() if line.get_markerfacecolor() == "white"]
+    # One set of points a look and one collection of whiskers (not an artist a row).
+    from matplotlib.collections import LineCollection
+
+    hollow = sum(len(line.get_xdata()) for line in axes.get_lines() if line.get_markerfacecolor() == "white")
     whiskers = [
-        line for line in axes.get_lines() if len(line.get_xdata()) == 2 and line.get_linestyle() == "-"
+        segment
+        for collection in axes.collections
+        if isinstance(collection, LineCollection)
+        for segment in collection.get_segments()
     ]
-    assert len(hollow) == 3 and len(whiskers) == 3
+    assert hollow == 3 and len(whiskers) == 3
+    assert all(len(segment) == 2 and segment[0][1] == segment[1][1] for segment in whiskers)
     assert any("no interval" in t for t in texts_of(figure))
 
 

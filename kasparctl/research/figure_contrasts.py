@@ -12,7 +12,18 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from kasparctl.research.figure_style import PAGE_WIDTH, SMALL, chunks, new_figure, short
+from kasparctl.research.figure_layout import (
+    EDGE,
+    PAD,
+    TICK,
+    legend_below,
+    lines,
+    points,
+    spacing,
+    title_above,
+    widest,
+)
+from kasparctl.research.figure_style import FONT_SIZE, PAGE_WIDTH, SMALL, chunks, new_figure, short
 from kasparctl.research.inference import MEASURES, MIN_CLUSTERS, Contrast
 
 ROWS_PER_PANEL = 62
@@ -80,10 +91,7 @@ def _page(panels: list[list[Row]], number: int, count: int) -> Any:
     from matplotlib.lines import Line2D
 
     most = max(len(rows) for rows in panels)
-    figure = new_figure(PAGE_WIDTH if len(panels) > 1 else 5.0, 1.4 + 0.128 * most)
-    grid = figure.subplots(1, len(panels), squeeze=False).ravel()
-    for axes, rows in zip(grid, panels, strict=True):
-        _panel(axes, rows)
+    figure = new_figure(PAGE_WIDTH if len(panels) > 1 else 5.0, 1.4 + 0.128 * most, layout=None)
     handles = [
         Line2D([], [], color="0.1", marker="o", label="Hedges' g, 95 % interval"),
         Line2D([], [], color="0.1", marker="D", label="Holm-adjusted p < 0.05"),
@@ -97,36 +105,83 @@ def _page(panels: list[list[Row]], number: int, count: int) -> Any:
             label=f"no interval: fewer than {MIN_CLUSTERS} clusters a side",
         ),
     ]
-    figure.legend(
-        handles=handles,
-        loc="outside lower center",
-        ncols=3,
-        title="A - B, clusters a side after each row",
+    # The fixed layout (figure_layout): each panel's row labels on its left, the legend
+    # and the axis labels below, the title above.
+    legend = legend_below(
+        figure, handles=handles, ncols=3, title="A - B, clusters a side after each row"
     )
     suffix = f" (page {number} of {count})" if count > 1 else ""
-    figure.suptitle("Contrasts: effect sizes (Hedges' g, A - B)" + suffix)
+    top = title_above(figure, "Contrasts: effect sizes (Hedges' g, A - B)" + suffix, FONT_SIZE + 2)
+    labels = [_label_width(figure, rows) + points(TICK_PAD) for rows in panels]
+    # Half the widest tick label past an axes' right end ("-0.5" under its last tick).
+    overhang = widest(figure, ["-0.5"], SMALL) / 2
+    grid = figure.add_gridspec(
+        1, len(panels),
+        **spacing(
+            figure, 1, len(panels),
+            left=points(EDGE) + labels[0], right=points(EDGE) + overhang,
+            top=top + points(PAD),
+            bottom=legend + points(PAD + TICK) + lines(1, SMALL) + lines(1, FONT_SIZE),
+            across=max(labels[1:], default=0.0) + overhang + points(PAD),
+        ),
+    )  # fmt: skip
+    grid_axes = grid.subplots(squeeze=False).ravel()
+    for axes, rows in zip(grid_axes, panels, strict=True):
+        _panel(axes, rows)
     return figure
 
 
+# The row labels' gap from their axes, points.
+TICK_PAD = 3.5
+
+
+def _label_width(figure: Any, rows: list[Row]) -> float:
+    """The widest row label of a panel (the measures' headers are bold), inches."""
+    plain = widest(figure, [label for label, c in rows if c is not None], SMALL - 1)
+    bold = widest(figure, [label for label, c in rows if c is None], SMALL - 1, "bold")
+    return max(plain, bold)
+
+
 def _panel(axes: Any, rows: list[Row]) -> None:
-    labels = []
-    for row, (label, contrast) in enumerate(rows):
-        labels.append(label)
+    """One column of rows: a collection of whiskers and three sets of points, not an
+    artist a row (a page has 124)."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.transforms import ScaledTranslation
+
+    whiskers: list[list[tuple[float, float]]] = []
+    significant: list[tuple[float, float]] = []
+    other: list[tuple[float, float]] = []
+    hollow: list[tuple[float, float]] = []
+    for row, (_, contrast) in enumerate(rows):
         if contrast is None:
             continue
         g = contrast.hedges_g
         assert g.value is not None
         if g.low is None or g.high is None:
-            axes.plot([g.value], [row], "o", color="0.1", markerfacecolor="white", markersize=3)
+            hollow.append((g.value, row))
             continue
-        axes.plot([g.low, g.high], [row, row], color="0.1", linewidth=0.9)
-        marker = "D" if contrast.significant else "o"
-        axes.plot([g.value], [row], marker, color="0.1", markersize=3)
+        whiskers.append([(g.low, row), (g.high, row)])
+        (significant if contrast.significant else other).append((g.value, row))
+    axes.add_collection(LineCollection(whiskers, colors="0.1", linewidths=0.9))
+    sets = ((other, "o", "0.1"), (significant, "D", "0.1"), (hollow, "o", "white"))
+    for found, marker, face in sets:
+        if found:
+            xs, ys = zip(*found, strict=True)
+            axes.plot(
+                xs, ys, linestyle="none", marker=marker, color="0.1",
+                markerfacecolor=face, markersize=3,
+            )  # fmt: skip
+    axes.autoscale_view()
     axes.axvline(0, color="0.5", linewidth=0.7, linestyle="--")
-    axes.set_yticks(range(len(rows)), labels)
-    for tick, (_, contrast) in zip(axes.get_yticklabels(), rows, strict=True):
-        if contrast is None:
-            tick.set_fontweight("bold")
-    axes.tick_params(axis="y", length=0, labelsize=SMALL - 1)
+    # The row labels as texts beside the axes, not as ticks (a tick is five artists).
+    axes.set_yticks([])
+    beside = axes.get_yaxis_transform() + ScaledTranslation(
+        -points(TICK_PAD), 0, axes.figure.dpi_scale_trans
+    )
+    for row, (label, contrast) in enumerate(rows):
+        axes.text(
+            0.0, row, label, transform=beside, ha="right", va="center", fontsize=SMALL - 1,
+            fontweight="bold" if contrast is None else "normal",
+        )  # fmt: skip
     axes.set_ylim(len(rows) - 0.5, -0.5)
     axes.set_xlabel("Hedges' g (clusters' own values)")

@@ -17,9 +17,20 @@ from typing import Any
 import numpy as np
 
 from kasparctl.research.figure_data import FigureData
+from kasparctl.research.figure_layout import (
+    EDGE,
+    PAD,
+    TICK,
+    legend_below,
+    lines,
+    points,
+    title_above,
+    widest,
+)
 from kasparctl.research.figure_panels import Layout, Panel, arrange
-from kasparctl.research.figure_strip import label_every, n_strip
+from kasparctl.research.figure_strip import N_FONT, label_every, n_strip, strip_grid
 from kasparctl.research.figure_style import (
+    FONT_SIZE,
     MIN_N,
     PAGE_WIDTH,
     SMALL,
@@ -36,6 +47,11 @@ COLUMNS = 2
 MAX_PLOTTED_GUESSES = 400
 MAX_MARKED_GUESSES = 40
 BAND_SHADES = ("#f2f2f2", "#e4e4e4")
+BAND_FONT = SMALL - 0.5
+# Between a panel's axes and its strip (the axes' tick marks), points; and under a
+# title (axes.titlepad).
+STRIP_GAP = 3.5 + 1.0
+TITLE_PAD = 6.0
 
 
 def entropy_by_trial(data: FigureData) -> tuple[list[Any] | None, str]:
@@ -71,24 +87,7 @@ def _page(
 
     rows, columns = grid_shape(len(panels), COLUMNS)
     width = PAGE_WIDTH if columns > 1 else 6.0
-    figure = new_figure(width, 1.2 + rows * (2.3 + 0.12 * _series_most(panels)))
-    outer = figure.add_gridspec(rows, columns)
-    column_width = (width - 0.9) / columns
-    for place, panel in enumerate(panels):
-        row, column = divmod(place, columns)
-        cell = outer[row, column].subgridspec(
-            2, 1, height_ratios=[4.0, 0.35 + 0.22 * len(panel.series)], hspace=0.02
-        )
-        axes = figure.add_subplot(cell[0])
-        strip = figure.add_subplot(cell[1], sharex=axes)
-        _panel(data, panel, axes, strip, longest, candidates, top, column_width)
-        axes.tick_params(labelbottom=False)
-        if column == 0:
-            axes.set_ylabel("entropy before the guess (bits)")
-        if row == rows - 1 or place + columns >= len(panels):
-            strip.set_xlabel("guess within a problem")
-        if column == columns - 1 or place == len(panels) - 1:
-            _band_names(data, axes, top)
+    figure = new_figure(width, 1.2 + rows * (2.3 + 0.12 * _series_most(panels)), layout=None)
     handles = [
         Line2D([], [], label=short(name, 30), markersize=3.5, **style.line())
         for name, style in layout.legend.items()
@@ -105,15 +104,50 @@ def _page(
         ),
         Line2D([], [], color="0.45", linestyle=":", label="no idea: log2(toys offered)"),
     ]
-    figure.legend(
+    # The fixed layout (figure_layout): the legend and title first, as they set the
+    # margins; band names right of the last column (and of a last panel left alone).
+    legend = legend_below(
+        figure,
         handles=handles,
-        loc="outside lower center",
         ncols=min(len(handles), 3),
         title=f"{layout.factor}; whiskers: 95 % interval (groups resampled); "
         "strip: n problems with that guess",
     )
     title = "Kaspar's uncertainty by guess: mean entropy"
-    figure.suptitle(title + (f" (page {number} of {count})" if count > 1 else ""))
+    heading = title_above(
+        figure, title + (f" (page {number} of {count})" if count > 1 else ""), FONT_SIZE + 2
+    )
+    bands = _band_spans(data, top)
+    named = widest(figure, [name for _, _, name in bands], BAND_FONT) + points(PAD)
+    ticks = widest(figure, ["0.0"], SMALL) + points(TICK)
+    titled = lines(1, SMALL + 1) + points(TITLE_PAD) if any(p.title for p in panels) else 0.0
+    axis = lines(1, SMALL) + points(TICK)  # the strip's tick labels under it
+    alone = len(panels) % columns != 0 and columns > 1  # the last panel in the left column
+    outer, inner = strip_grid(
+        figure, rows, columns, points(STRIP_GAP) + lines(1, N_FONT),
+        left=points(EDGE) + lines(1, FONT_SIZE) + points(PAD) + ticks,
+        right=points(EDGE) + named,
+        top=heading + titled + points(PAD),
+        bottom=legend + points(PAD) + axis + lines(1, FONT_SIZE),
+        across=ticks + points(PAD) + (named if alone else 0.0),
+        down=axis + (lines(1, FONT_SIZE) if alone else 0.0) + titled + points(PAD),
+    )  # fmt: skip
+    column_width = (width - 0.9) / columns
+    for place, panel in enumerate(panels):
+        row, column = divmod(place, columns)
+        cell = outer[row, column].subgridspec(
+            2, 1, height_ratios=[4.0, 0.35 + 0.22 * len(panel.series)], hspace=inner
+        )
+        axes = figure.add_subplot(cell[0])
+        strip = figure.add_subplot(cell[1], sharex=axes)
+        _panel(data, panel, axes, strip, longest, candidates, top, column_width)
+        axes.tick_params(labelbottom=False)
+        if column == 0:
+            axes.set_ylabel("entropy before the guess (bits)")
+        if row == rows - 1 or place + columns >= len(panels):
+            strip.set_xlabel("guess within a problem")
+        if column == columns - 1 or place == len(panels) - 1:
+            _band_names(bands, axes)
     return figure
 
 
@@ -182,13 +216,22 @@ def _panel(
         axes.set_title(short(panel.title, 44), fontsize=SMALL + 1)
 
 
-def _band_names(data: FigureData, axes: Any, top: float) -> None:
-    """The phrase bands' names beside the axes, where no data are."""
-    right = axes.secondary_yaxis("right")
-    spans = [(b.min, min(b.max, top), b.name) for b in data.bands if b.min < top]
-    right.set_yticks(
-        [(low + high) / 2 for low, high, _ in spans],
-        [name.replace("_", " ") for _, _, name in spans],
-        fontsize=SMALL - 0.5,
+def _band_spans(data: FigureData, top: float) -> list[tuple[float, float, str]]:
+    """The phrase bands within the axes: their bottom, top and name."""
+    return [
+        (b.min, min(b.max, top), b.name.replace("_", " ")) for b in data.bands if b.min < top
+    ]
+
+
+def _band_names(spans: list[tuple[float, float, str]], axes: Any) -> None:
+    """The phrase bands' names beside the axes, where no data are: texts, not a second
+    axis (whose ticks would cost a draw each)."""
+    from matplotlib.transforms import ScaledTranslation
+
+    beside = axes.get_yaxis_transform() + ScaledTranslation(
+        points(PAD), 0, axes.figure.dpi_scale_trans
     )
-    right.tick_params(length=0)
+    for low, high, name in spans:
+        axes.text(
+            1.0, (low + high) / 2, name, transform=beside, fontsize=BAND_FONT, va="center"
+        )

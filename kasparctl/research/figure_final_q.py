@@ -15,8 +15,20 @@ from typing import Any
 import numpy as np
 
 from kasparctl.research.conditions import Condition
+from kasparctl.research.figure_layout import (
+    EDGE,
+    PAD,
+    TICK,
+    lines,
+    points,
+    spacing,
+    title_above,
+    widest,
+)
 from kasparctl.research.figure_style import (
+    FONT_SIZE,
     PAGE_WIDTH,
+    SMALL,
     chunks,
     grid_shape,
     new_figure,
@@ -28,6 +40,12 @@ COLUMNS = 3
 CELL_FONT = 5.0
 # The smallest cell, in points, that its value (e.g. "-0.53" at CELL_FONT) fits in.
 MIN_CELL_POINTS = 5 * 0.62 * CELL_FONT + 2
+# Each row's n this many points right of its panel; the colour bar's gap and width (in).
+N_GAP = 2.0
+BAR_GAP = 0.15
+BAR_WIDTH = 0.12
+# matplotlib's gap under an axes' title (axes.titlepad), points.
+TITLE_PAD = 6.0
 
 Panel = tuple[Condition, dict[str, list[dict[str, float]]]]
 
@@ -74,29 +92,45 @@ def _page(
 ) -> Any:
     rows, columns = grid_shape(len(page), COLUMNS)
     width = min(PAGE_WIDTH, 1.6 + 2.3 * columns)
-    figure = new_figure(width, 1.0 + 2.25 * rows)
-    grid = figure.subplots(rows, columns, squeeze=False)
-    flat = grid.ravel()
+    figure = new_figure(width, 1.0 + 2.25 * rows, layout=None)
+    counts = [[f"n={len(by_answer.get(t, []))}" for t in toys] for (_, by_answer), _ in page]
+    # The fixed layout (figure_layout): toy names left and below, each panel's n on its
+    # right, two-line titles above, the colour bar at the right edge.
+    names = widest(figure, toys, SMALL)
+    n_width = widest(figure, [n for column in counts for n in column], SMALL) + points(N_GAP)
+    bar_labels = widest(figure, [f"{-limit:.2f}", f"{limit:.2f}"], SMALL)
+    left = points(EDGE) + lines(1, FONT_SIZE) + points(PAD + TICK) + names
+    right = n_width + BAR_GAP + BAR_WIDTH + points(TICK + PAD) + bar_labels
+    right += lines(1, FONT_SIZE) + points(EDGE)
+    titles = lines(2, FONT_SIZE + 1) + points(TITLE_PAD)
+    suffix = f" (page {number} of {count})" if count > 1 else ""
+    top = title_above(figure, "Final Q-values by correct toy" + suffix, FONT_SIZE + 2) + titles
+    bottom = points(EDGE) + lines(1, FONT_SIZE) + points(PAD + TICK) + names
+    grid = figure.add_gridspec(
+        rows, columns,
+        **spacing(
+            figure, rows, columns, left=left, right=right, top=top, bottom=bottom,
+            across=n_width + points(PAD + TICK), down=titles + points(PAD + TICK),
+        ),
+    )  # fmt: skip
+    flat = grid.subplots(squeeze=False).ravel()
     for unused in flat[len(page) :]:
         unused.set_axis_off()
     cell_points = (width - 1.4) / columns / (len(toys) + 1.5) * 72
     annotate = cell_points >= MIN_CELL_POINTS
     image = None
-    for place, ((condition, by_answer), matrix) in enumerate(page):
-        axes = flat[place]
-        column = place % columns
+    for place_, ((condition, by_answer), matrix) in enumerate(page):
+        axes = flat[place_]
+        column = place_ % columns
         image = axes.imshow(matrix, cmap="RdBu_r", vmin=-limit, vmax=limit)
-        bottom = place + columns >= len(page)
-        axes.set_xticks(
-            range(len(toys)),
-            toys if bottom else [],
-            rotation=90,
-        )
+        bottom_row = place_ + columns >= len(page)
+        axes.set_xticks(range(len(toys)), toys if bottom_row else [], rotation=90)
         axes.set_yticks(range(len(toys)), toys if column == 0 else [])
-        counts = axes.secondary_yaxis("right")
-        counts.set_yticks(range(len(toys)), [f"n={len(by_answer.get(t, []))}" for t in toys])
-        counts.tick_params(length=0, pad=1)
-        if bottom:
+        # Each row's n beside it: texts, not a second axis (its ticks cost a draw each).
+        beside = axes.get_yaxis_transform() + _nudge(figure)
+        for row, n in enumerate(counts[place_]):
+            axes.text(1.0, row, n, transform=beside, fontsize=SMALL, va="center", ha="left")
+        if bottom_row:
             axes.set_xlabel("toy")
         if column == 0:
             axes.set_ylabel("correct toy (learned problems)")
@@ -115,8 +149,24 @@ def _page(
                         fontsize=CELL_FONT,
                         color=ink,
                     )
-    colourbar = figure.colorbar(image, ax=list(flat), shrink=0.6, aspect=30)
+    page_width, page_height = figure.get_size_inches()
+    grid_top, grid_bottom = 1 - top / page_height, bottom / page_height
+    tall = 0.6 * (grid_top - grid_bottom)
+    bar = figure.add_axes(
+        (
+            1 - (right - n_width - BAR_GAP) / page_width,
+            grid_bottom + (grid_top - grid_bottom - tall) / 2,
+            BAR_WIDTH / page_width,
+            tall,
+        )
+    )
+    colourbar = figure.colorbar(image, cax=bar)
     colourbar.set_label("mean final Q-value")
-    suffix = f" (page {number} of {count})" if count > 1 else ""
-    figure.suptitle("Final Q-values by correct toy" + suffix)
     return figure
+
+
+def _nudge(figure: Any) -> Any:
+    """N_GAP points to the right, at any size."""
+    from matplotlib.transforms import ScaledTranslation
+
+    return ScaledTranslation(points(N_GAP), 0, figure.dpi_scale_trans)

@@ -37,3 +37,16 @@ def n_strip(
     strip.set_ylabel("n", rotation=0, va="center", labelpad=6)
     if every > 1:
         strip.set_title(f"n every {every}", fontsize=N_FONT, loc="right", pad=1)
+
+
+def strip_grid(
+    figure: Any, rows: int, columns: int, gap: float, **margins: float
+) -> tuple[Any, float]:
+    """The page's grid of panels, each an axes over its n strip (figure_layout.spacing's
+    `margins`), and the hspace that leaves `gap` inches between a panel's axes and strip."""
+    from kasparctl.research.figure_layout import spacing
+
+    grid = spacing(figure, rows, columns, **margins)
+    height = figure.get_size_inches()[1] * (grid["top"] - grid["bottom"])
+    cell = height / (rows + grid["hspace"] * (rows - 1))
+    return figure.add_gridspec(rows, columns, **grid), gap / ((cell - gap) / 2)

@@ -11,7 +11,7 @@ contrasts than fit become small multiples over several pages, or are aggregated.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -112,15 +112,20 @@ def short(label: str, width: int = 28) -> str:
     return label if len(label) <= width else label[: width - 1] + "…"
 
 
-def new_figure(width: float, height: float) -> Any:
-    """A figure on its own Agg canvas (no pyplot, no global state), at most a page."""
+def new_figure(
+    width: float, height: float, layout: Literal["constrained"] | None = "constrained"
+) -> Any:
+    """A figure on its own Agg canvas (no pyplot, no global state), at most a page.
+
+    `layout` None: the figure places its own grid (figure_layout), which costs nothing
+    at its draw."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     figure = Figure(
         figsize=(min(width, PAGE_WIDTH), min(height, PAGE_HEIGHT)),
         dpi=PNG_DPI,
-        layout="constrained",
+        layout=layout,
     )
     FigureCanvasAgg(figure)
     return figure

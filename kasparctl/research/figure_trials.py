@@ -16,9 +16,20 @@ import numpy as np
 
 from kasparctl.research.conditions import Condition
 from kasparctl.research.figure_data import FigureData
+from kasparctl.research.figure_layout import (
+    EDGE,
+    PAD,
+    TICK,
+    legend_below,
+    lines,
+    points,
+    title_above,
+    widest,
+)
 from kasparctl.research.figure_panels import Layout, Panel, arrange
-from kasparctl.research.figure_strip import label_every, n_strip
+from kasparctl.research.figure_strip import N_FONT, label_every, n_strip, strip_grid
 from kasparctl.research.figure_style import (
+    FONT_SIZE,
     MIN_N,
     PAGE_WIDTH,
     SMALL,
@@ -32,6 +43,10 @@ from kasparctl.research.figure_style import (
 PANELS_PER_PAGE = 6
 COLUMNS = 2
 MAX_BINS = 32
+# Between a panel's axes and its strip (the axes' tick marks), points; and under a
+# title (axes.titlepad).
+STRIP_GAP = 3.5 + 1.0
+TITLE_PAD = 6.0
 
 
 def learned_lengths(condition: Condition) -> list[int]:
@@ -73,15 +88,55 @@ def _page(
     rows, columns = grid_shape(len(panels), COLUMNS)
     width = PAGE_WIDTH if columns > 1 else 6.0
     most = max(len(p.series) for p in panels)
-    figure = new_figure(width, 1.2 + rows * (2.1 + 0.12 * most))
-    outer = figure.add_gridspec(rows, columns)
+    figure = new_figure(width, 1.2 + rows * (2.1 + 0.12 * most), layout=None)
     binned = len(edges) - 1 == MAX_BINS and edges[1] - edges[0] != 1
+    handles = [
+        Line2D([], [], label=short(name, 30), **style.line())
+        for name, style in layout.legend.items()
+    ]
+    handles.append(
+        Line2D(
+            [],
+            [],
+            color="0.3",
+            marker="o",
+            markerfacecolor="white",
+            linestyle="none",
+            label=f"fewer than {MIN_N} learned: hollow, not joined",
+        )
+    )
+    # The fixed layout (figure_layout): the legend and title first, as they set the margins.
+    legend = legend_below(
+        figure,
+        handles=handles,
+        ncols=min(len(handles), 3),
+        title=f"{layout.factor}; whiskers: 95 % interval (groups resampled); "
+        "strip: n learned problems in that bin",
+    )
+    suffix = f" (page {number} of {count})" if count > 1 else ""
+    heading = title_above(
+        figure, "Trials to learn: share of each condition's learned problems" + suffix,
+        FONT_SIZE + 2,
+    )  # fmt: skip
+    ticks = widest(figure, ["100"], SMALL) + points(TICK)
+    titled = lines(1, SMALL + 1) + points(TITLE_PAD) if any(p.title for p in panels) else 0.0
+    axis = lines(1, SMALL) + points(TICK)  # the strip's tick labels under it
+    alone = len(panels) % columns != 0 and columns > 1  # a panel above an empty place
+    outer, inner = strip_grid(
+        figure, rows, columns, points(STRIP_GAP) + lines(1, N_FONT),
+        left=points(EDGE) + lines(1, FONT_SIZE) + points(PAD) + ticks,
+        right=points(EDGE) + ticks / 2,
+        top=heading + titled + points(PAD),
+        bottom=legend + points(PAD) + axis + lines(1, FONT_SIZE),
+        across=ticks + points(PAD),
+        down=axis + (lines(1, FONT_SIZE) if alone else 0.0) + titled + points(PAD),
+    )  # fmt: skip
     tallest = 0.0
     axes_made = []
     for place, panel in enumerate(panels):
         row, column = divmod(place, columns)
         cell = outer[row, column].subgridspec(
-            2, 1, height_ratios=[4.0, 0.35 + 0.22 * len(panel.series)], hspace=0.02
+            2, 1, height_ratios=[4.0, 0.35 + 0.22 * len(panel.series)], hspace=inner
         )
         axes = figure.add_subplot(cell[0])
         strip = figure.add_subplot(cell[1], sharex=axes)
@@ -100,30 +155,6 @@ def _page(
         axes_made.append(axes)
     for axes in axes_made:
         axes.set_ylim(0, max(tallest * 1.08, 5.0))
-    handles = [
-        Line2D([], [], label=short(name, 30), **style.line())
-        for name, style in layout.legend.items()
-    ]
-    handles.append(
-        Line2D(
-            [],
-            [],
-            color="0.3",
-            marker="o",
-            markerfacecolor="white",
-            linestyle="none",
-            label=f"fewer than {MIN_N} learned: hollow, not joined",
-        )
-    )
-    figure.legend(
-        handles=handles,
-        loc="outside lower center",
-        ncols=min(len(handles), 3),
-        title=f"{layout.factor}; whiskers: 95 % interval (groups resampled); "
-        "strip: n learned problems in that bin",
-    )
-    suffix = f" (page {number} of {count})" if count > 1 else ""
-    figure.suptitle("Trials to learn: share of each condition's learned problems" + suffix)
     return figure
 
 

@@ -7,6 +7,7 @@ regularised incomplete beta function is evaluated here by its continued fraction
 
 from __future__ import annotations
 
+import functools
 import math
 
 _EPSILON = 1e-15
@@ -65,6 +66,9 @@ def density(t: float, df: float) -> float:
     return math.exp(log_scale - (df + 1) / 2 * math.log1p(t * t / df))
 
 
+# Memoised: a report asks for the same few (0.975, df) hundreds of times (every interval's
+# stretch, every contrast), and each answer costs dozens of continued fractions.
+@functools.lru_cache(maxsize=4096)
 def quantile(probability: float, df: float) -> float:
     """The t with P(T <= t) = probability (0.5 < probability < 1).
 
