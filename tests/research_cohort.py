@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import msgspec
+from still_body import still_body
 
 from kasparctl.config import SessionPlan
 from kasparctl.sim import simtime
@@ -54,7 +55,8 @@ def make_cohort(root: Path) -> Cohort:
     run's temporary directory), copied for each module that asks, which may change its copy."""
     original = _BUILT.get(root.parent)
     if original is None:
-        original = _BUILT[root.parent] = _play_cohort(root.parent / "cohort-played-once")
+        with still_body():  # as a test's games: the fixtures asking are module-scoped
+            original = _BUILT[root.parent] = _play_cohort(root.parent / "cohort-played-once")
     state_dir = shutil.copytree(original.state_dir, root / "state")
     participants = shutil.copy(original.participants, root / "participants.csv")
     return Cohort(state_dir, Path(participants))

@@ -19,6 +19,7 @@ from typing import Any
 
 import msgspec
 from rig_events import answer_the_check, on_event
+from still_body import still_body
 
 from hal.servos.api import FaultKind
 from kasparctl.config import Config, SessionPlan
@@ -130,7 +131,8 @@ def make_study(root: Path) -> Study:
     run's temporary directory), copied for each module that asks, which may change its copy."""
     original = _BUILT.get(root.parent)
     if original is None:
-        original = _BUILT[root.parent] = _play_study(root.parent / "study-played-once")
+        with still_body():  # as a test's games: the fixtures asking are module-scoped
+            original = _BUILT[root.parent] = _play_study(root.parent / "study-played-once")
     state_dir = shutil.copytree(original.state_dir, root / "state")
     return Study(state_dir, dict(original.planned))
 

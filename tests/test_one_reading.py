@@ -28,6 +28,7 @@ from hypothesis import strategies as st
 from reading_check import Readers, research_agrees
 from research_fixtures import Scenario, cut_after_trial
 from rig_events import on_event
+from still_body import still_body
 
 from hal.servos.api import FaultKind
 from kasparctl.cli import main
@@ -107,9 +108,10 @@ def with_limit(limit: int) -> Config:
 def given_up(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """`max_trials_per_target = 9`, `demo --p-wrong-red 1.0 --seed 3`: every right guess is
     answered red, so every bag is confused about, then given up."""
-    return played(
-        tmp_path_factory.mktemp("given-up"), with_limit(9), 3, Teacher(p_wrong_red=1.0)
-    )
+    with still_body():  # as a test's games (tests/still_body.py)
+        return played(
+            tmp_path_factory.mktemp("given-up"), with_limit(9), 3, Teacher(p_wrong_red=1.0)
+        )
 
 
 def test_status_and_the_view_agree_on_the_confusion_after_a_give_up(given_up: Path) -> None:
@@ -162,7 +164,8 @@ FOOLED = Teacher(p_wrong_green=0.15)
 
 @pytest.fixture(scope="module")
 def reopened(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return played(tmp_path_factory.mktemp("reopened"), demo_config(), 4, FOOLED)
+    with still_body():  # as a test's games (tests/still_body.py)
+        return played(tmp_path_factory.mktemp("reopened"), demo_config(), 4, FOOLED)
 
 
 def test_the_report_counts_the_win_shifts_the_csv_marks(reopened: Path, tmp_path: Path) -> None:
@@ -296,6 +299,8 @@ def games(tmp_path_factory: pytest.TempPathFactory, given_up: Path, reopened: Pa
         out=io.StringIO(),
         clock=stepping_clock(),
     )
+    # The live body: its motions' times are what make a child's silence long enough for a
+    # prompt in this game, and the test asks for every kind of record.
     play_scenario(state_dir, config, options, researcher_and_breakage)
     (session_dir,) = (state_dir / "sessions").iterdir()
     cut_after_trial(session_dir, 14)

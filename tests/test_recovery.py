@@ -20,6 +20,7 @@ import msgspec
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from still_body import still_body
 
 from kasparctl.cli import main
 from kasparctl.config import GameSettings
@@ -278,11 +279,12 @@ def session_of(state_dir: Path) -> tuple[Session, list[Any], GameState]:
 def recovered(tmp_path_factory: pytest.TempPathFactory) -> Path:
     state_dir = tmp_path_factory.mktemp("recovered")
     out = io.StringIO()
-    result = run_demo(
-        demo_config(),
-        DemoOptions(state_dir=state_dir, seed=SEED, teacher=FOOLED, out=out),
-        fast=True,
-    )
+    with still_body():  # as a test's games (tests/still_body.py)
+        result = run_demo(
+            demo_config(),
+            DemoOptions(state_dir=state_dir, seed=SEED, teacher=FOOLED, out=out),
+            fast=True,
+        )
     assert result.finished
     (state_dir / "transcript.txt").write_text(out.getvalue())
     return state_dir

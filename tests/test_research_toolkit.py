@@ -37,6 +37,16 @@ def cohort(tmp_path_factory: pytest.TempPathFactory) -> Cohort:
     return make_cohort(tmp_path_factory.mktemp("cohort"))
 
 
+@pytest.fixture(scope="module")
+def coded_report(cohort: Cohort, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The report of the cohort with its participants.csv: made once for the tests that
+    read it (each of them ran this same command into its own directory)."""
+    out = tmp_path_factory.mktemp("coded-report")
+    arguments = ["report", "--state-dir", str(cohort.state_dir), "--out", str(out)]
+    assert main([*arguments, "--participants", str(cohort.participants)]) == 0
+    return out
+
+
 def read_csv(path: Path) -> list[dict[str, str]]:
     with path.open(newline="", encoding="utf-8") as stream:
         return list(csv.DictReader(stream))
@@ -269,10 +279,8 @@ def test_the_summary_counts_errors_by_cause(cohort: Cohort, tmp_path: Path) -> N
 # -- per-child measures ----------------------------------------------------------------
 
 
-def test_children_csv_holds_each_participants_teaching(cohort: Cohort, tmp_path: Path) -> None:
-    arguments = ["report", "--state-dir", str(cohort.state_dir), "--out", str(tmp_path)]
-    assert main([*arguments, "--participants", str(cohort.participants)]) == 0
-    children = {row["participant"]: row for row in read_csv(tmp_path / "children.csv")}
+def test_children_csv_holds_each_participants_teaching(cohort: Cohort, coded_report: Path) -> None:
+    children = {row["participant"]: row for row in read_csv(coded_report / "children.csv")}
     expected: dict[str, dict[str, Any]] = {}
     for _, (plan, records) in raw(cohort.state_dir).items():
         codes = plan["plan"]["participants"]
@@ -314,10 +322,8 @@ def test_children_csv_holds_each_participants_teaching(cohort: Cohort, tmp_path:
 # -- inference -------------------------------------------------------------------------
 
 
-def test_intervals_rest_on_the_groups_and_cover_the_estimate(cohort: Cohort, tmp_path: Path) -> None:
-    arguments = ["report", "--state-dir", str(cohort.state_dir), "--out", str(tmp_path)]
-    assert main([*arguments, "--participants", str(cohort.participants)]) == 0
-    summary = json.loads((tmp_path / "summary.json").read_text())
+def test_intervals_rest_on_the_groups_and_cover_the_estimate(coded_report: Path) -> None:
+    summary = json.loads((coded_report / "summary.json").read_text())
     assert summary["intervals"]["unit"] == "group"
     for condition in summary["conditions"]:
         assert condition["clusters"] == 4
@@ -332,11 +338,9 @@ def test_intervals_rest_on_the_groups_and_cover_the_estimate(cohort: Cohort, tmp
 
 
 def test_contrasts_compare_the_uncertainty_modes_and_the_participants_groups(
-    cohort: Cohort, tmp_path: Path
+    coded_report: Path,
 ) -> None:
-    arguments = ["report", "--state-dir", str(cohort.state_dir), "--out", str(tmp_path)]
-    assert main([*arguments, "--participants", str(cohort.participants)]) == 0
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    summary = json.loads((coded_report / "summary.json").read_text())
     factors = {(c["factor"], c["a"], c["b"]) for c in summary["contrasts"]}
     assert ("uncertainty mode", "paper/spoken", "paper/silent") in factors
     assert ("participant group", "ASC", "TD") in factors
@@ -353,7 +357,7 @@ def test_contrasts_compare_the_uncertainty_modes_and_the_participants_groups(
             # Children are nested in groups: two groups a side, so no interval (below MIN_CLUSTERS).
             assert (contrast["clusters_a"], contrast["clusters_b"], contrast["unit"]) == (2, 2, "group")
             assert contrast["difference_low"] is None and contrast["p"] is None
-    text = (tmp_path / "summary.md").read_text()
+    text = (coded_report / "summary.md").read_text()
     assert "## Contrasts" in text and "| uncertainty mode | paper/spoken - paper/silent |" in text
     assert "contrasts" in summary["figures"]
 

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from still_body import still_body
 
 from kasparctl.cli import main
 from kasparctl.game.session import session_dirs
@@ -24,7 +25,8 @@ def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A state directory with one finished pilot session."""
     state_dir = tmp_path_factory.mktemp("state")
     options = DemoOptions(state_dir=state_dir, seed=4, teacher=Teacher(0.1, 0.1), out=io.StringIO())
-    assert run_demo(with_variant(demo_config(), "pilot"), options, fast=True).finished
+    with still_body():  # as a test's games (tests/still_body.py)
+        assert run_demo(with_variant(demo_config(), "pilot"), options, fast=True).finished
     return state_dir
 
 
