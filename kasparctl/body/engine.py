@@ -51,7 +51,7 @@ from typing import Any
 import structlog
 
 from hal.clock import Alarm, Clock
-from hal.errors import HalError
+from hal.errors import HalError, KasparError
 from hal.servos.api import Fault, Goal, ServoApi
 from hal.servos.settings import ServoSettings
 from kasparctl.body.api import Gaze, GazeKind
@@ -170,7 +170,7 @@ class _Playback:
             self.done.set_result(None)
 
 
-class _MustStep(Exception):
+class _MustStep(KasparError):
     """A look ahead met a tick that changes the body's own state (a layer begins or ends,
     life is due, the game moved a joint): the loop steps there."""
 
