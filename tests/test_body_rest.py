@@ -17,6 +17,7 @@ import itertools
 import random
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import msgspec
@@ -40,6 +41,26 @@ def _goal_row(goal: Goal) -> tuple[float, str, float, str]:
     return (round(goal.time, 9), goal.joint, goal.degrees, goal.source)
 
 
+def count_steps(body: LiveBody) -> Callable[[], int]:
+    """Count `body`'s steps from here on, whole and light; the count so far."""
+    steps = 0
+    whole, light = body.step, body._light_step
+
+    async def counted_whole(now: float) -> dict[str, float]:
+        nonlocal steps
+        steps += 1
+        return await whole(now)
+
+    async def counted_light(goals: dict[str, float]) -> dict[str, float]:
+        nonlocal steps
+        steps += 1
+        return await light(goals)
+
+    body.step = counted_whole  # type: ignore[method-assign]
+    body._light_step = counted_light  # type: ignore[method-assign]
+    return lambda: steps
+
+
 def play_game(tmp_path: Path, variant: str, seed: int, rests: bool) -> tuple[list[tuple], int]:
     """Every goal the servos received in one whole demo game, and the body's steps."""
     goals: list[tuple] = []
@@ -52,25 +73,11 @@ def play_game(tmp_path: Path, variant: str, seed: int, rests: bool) -> tuple[lis
         body = rig.body
         assert isinstance(body, LiveBody)
         body.rests = rests
-        real_step = body.step
-
-        async def counted(now: float) -> dict[str, float]:
-            nonlocal steps
-            steps += 1
-            return await real_step(now)
-
-        body.step = counted  # type: ignore[method-assign]
-        real_light = body._light_step
-
-        async def counted_light(goals: dict[str, float]) -> dict[str, float]:
-            nonlocal steps
-            steps += 1
-            return await real_light(goals)
-
-        body._light_step = counted_light  # type: ignore[method-assign]
+        counted = count_steps(body)
         rig.servos.on_goals(lambda goal: goals.append(_goal_row(goal)))
         result = await rig.run()
         assert result.finished
+        steps = counted()
 
     simtime.run(main(), virtual=True)
     return goals, steps
@@ -102,23 +109,7 @@ async def _alive_for(seconds: float, rests: bool) -> tuple[list[tuple], int]:
     body.rests = rests
     goals: list[tuple] = []
     servos.on_goals(lambda goal: goals.append(_goal_row(goal)))
-    steps = 0
-    real_step = body.step
-
-    async def counted(now: float) -> dict[str, float]:
-        nonlocal steps
-        steps += 1
-        return await real_step(now)
-
-    body.step = counted  # type: ignore[method-assign]
-    real_light = body._light_step
-
-    async def counted_light(goals: dict[str, float]) -> dict[str, float]:
-        nonlocal steps
-        steps += 1
-        return await real_light(goals)
-
-    body._light_step = counted_light  # type: ignore[method-assign]
+    counted = count_steps(body)
     await body.start()
     body.set_alive(True)
     await asyncio.sleep(seconds / 2)
@@ -126,7 +117,7 @@ async def _alive_for(seconds: float, rests: bool) -> tuple[list[tuple], int]:
     await asyncio.sleep(seconds / 2)
     await body.close()
     await servos.close()
-    return goals, steps
+    return goals, counted()
 
 
 def test_life_alone_rests_between_counts_and_sends_what_the_ticking_loop_sends() -> None:

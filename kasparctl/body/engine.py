@@ -518,25 +518,19 @@ class LiveBody:
     async def _light_step(self, goals: dict[str, float]) -> dict[str, float]:
         """A step at a tick where only planned life changes counts: those joints' goals,
         without composing every layer again (what a whole step would send there)."""
-        try:
-            sent = await self._servos.stream(goals, self.period, dict(self._light_layers))
-        except HalError as error:
-            if not self._fault_seen:
-                log.warning("body paused: the servos refuse motion", error=str(error))
-                self._fault_seen = True
-            self.cancel()
-            return {}
-        self._fault_seen = False
-        self._sent.update(sent)
-        return sent
+        return await self._send(goals, dict(self._light_layers))
 
     async def step(self, now: float) -> dict[str, float]:
         """One tick: blend the layers for `now` and send the goals; the goals sent."""
         pose = self.compose(now)
         if not pose:
             return {}
+        return await self._send(pose, dict(self.layers))
+
+    async def _send(self, pose: dict[str, float], sources: dict[str, str]) -> dict[str, float]:
+        """Stream `pose` as one step; a refusal (a fault, a pause) stills the body, once told."""
         try:
-            sent = await self._servos.stream(pose, self.period, dict(self.layers))
+            sent = await self._servos.stream(pose, self.period, sources)
         except HalError as error:
             if not self._fault_seen:
                 log.warning("body paused: the servos refuse motion", error=str(error))
