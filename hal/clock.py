@@ -62,7 +62,8 @@ class Alarm:
     On the real clock of a real event loop a timerfd wakes the loop at the moment
     (hal.timerfd: asyncio's own timers are up to 1 ms late); on a simulated loop or
     any other clock, and where there is no timerfd, it is the clock's own sleep.
-    Not for several tasks at once: one alarm per loop that waits on it.
+    interrupt() ends a wait early (the body's loop, woken by the game's news). Not for
+    several tasks at once: one alarm per loop that waits on it.
     """
 
     def __init__(self, clock: Clock) -> None:

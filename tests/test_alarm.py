@@ -107,3 +107,36 @@ def test_on_python_3_13_the_os_module_timer_is_called_as_documented(monkeypatch)
     timer.arm(12.5)
     timer.close()
     assert calls == [("create", 1, os.O_NONBLOCK | os.O_CLOEXEC), ("settime", 1, 12.5, 0.0)]
+
+
+@pytest.mark.parametrize("clock", [MonotonicClock(), LoopClock()], ids=["monotonic", "loop"])
+async def test_an_interrupted_wait_says_so_and_its_timer_rings_no_later_wait(clock) -> None:
+    # The body's loop sleeps to its next count change and is woken by the game's news; the
+    # first wait's moment then passes during the next, which must still wait its own.
+    alarm = Alarm(clock)
+    try:
+        loop = asyncio.get_running_loop()
+        first = clock.now() + 0.05
+        loop.call_later(0.01, alarm.interrupt)
+        assert await alarm.sleep_until(first) is True
+        assert clock.now() < first
+        second = clock.now() + 0.3
+        assert await alarm.sleep_until(second) is False
+        assert clock.now() >= second
+        alarm.interrupt()  # no wait in progress: nothing happens
+        assert await alarm.sleep_until(clock.now()) is False
+    finally:
+        alarm.close()
+
+
+def test_an_interrupt_in_simulated_time_ends_the_wait_at_its_own_moment() -> None:
+    async def interrupted() -> tuple[bool, float]:
+        alarm = Alarm(LoopClock())
+        loop = asyncio.get_running_loop()
+        start = loop.time()
+        loop.call_later(2.0, alarm.interrupt)
+        rung = await alarm.sleep_until(start + 3600)
+        return rung, loop.time() - start
+
+    rung, waited = simtime.run(interrupted(), virtual=True)
+    assert rung is True and waited == pytest.approx(2.0)

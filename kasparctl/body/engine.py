@@ -364,7 +364,7 @@ class LiveBody:
             due = begin + next_tick * period
             if due - self._clock.now() < -period:  # far behind: start again, no burst
                 begin, stepped, next_tick, looking = self._clock.now(), 0, 0, False
-                due = begin
+                due, self._light = begin, None
             if await self._alarm.sleep_until(due + TIE_S):
                 next_tick, looking, self._light = self._tick_for_news(begin, stepped), False, None
                 continue
@@ -374,10 +374,8 @@ class LiveBody:
             now = self._clock.now()
             if self.lateness is not None:
                 self.lateness.append(now - due)
-            if self._light is not None:
-                sent = await self._light_step(self._light)
-            else:
-                sent = await self.step(now)
+            light, self._light = self._light, None  # planned for this tick alone
+            sent = await (self._light_step(light) if light is not None else self.step(now))
             stepped = next_tick
             if not sent and self.quiet():
                 # Nothing moves: no goal to send until a layer has something to do. The
