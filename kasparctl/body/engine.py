@@ -561,11 +561,11 @@ class LiveBody:
         if self._blinking:
             self._schedule_life(now, peek)
             if self._idle is not None:
-                idle = self._additive(self._idle, now, home, out, layers, peek)
+                idle = self._played(self._idle, now, home, out, layers, peek, additive=True)
                 if not peek:
                     self._idle = idle
             if self._blink is not None:
-                blink = self._relative(self._blink, now, home, out, layers, peek)
+                blink = self._played(self._blink, now, home, out, layers, peek, additive=False)
                 if not peek:
                     self._blink = blink
         if self._mouth_joint is not None and self._mouth_joint in held:
@@ -577,7 +577,8 @@ class LiveBody:
                 out[self._mouth_joint] = self._mouth_closed + opening * span
                 layers[self._mouth_joint] = MOUTH_LAYER
         if self._gesture is not None:
-            gesture = self._relative(self._gesture, now, home, out, layers, peek)
+            gesture = self._played(self._gesture, now, home, out, layers, peek,
+                                   additive=False)
             if not peek:
                 self._gesture = gesture
         found = self._found_home
@@ -727,59 +728,35 @@ class LiveBody:
                 if joint in move.start:
                     self._set_home(joint, target)
 
-    def _additive(
-        self,
-        playback: _Playback,
-        now: float,
-        held: Mapping[str, float],
-        out: dict[str, float],
-        layers: dict[str, str],
-        peek: bool,
-    ) -> _Playback | None:
-        """Offsets added to what the layers below want (else to where the joint was)."""
-        if playback.started is None:
-            if peek:
-                raise _MustStep
-            playback.begin(
-                now, {j: held[j] for j in playback.behaviour.joints if j in held}, self.period
-            )
-            if not out.keys() & playback.base.keys():  # over still joints: its own goals
-                playback.foresee(self._counter, self._within, self._reach)
-        return self._played(playback, now, out, layers, peek, additive=True)
-
-    def _relative(
-        self,
-        playback: _Playback,
-        now: float,
-        held: Mapping[str, float],
-        out: dict[str, float],
-        layers: dict[str, str],
-        peek: bool,
-    ) -> _Playback | None:
-        """Offsets from where each joint was (or was wanted) at the first tick; overrides."""
-        if playback.started is None:
-            if peek:
-                raise _MustStep
-            playback.begin(
-                now,
-                {j: out.get(j, held[j]) for j in playback.behaviour.joints if j in held},
-                self.period,
-            )
-            if playback.layer == BLINK_LAYER:
-                playback.foresee(self._counter, self._within, self._reach)
-        return self._played(playback, now, out, layers, peek, additive=False)
-
     def _played(
         self,
         playback: _Playback,
         now: float,
+        held: Mapping[str, float],
         out: dict[str, float],
         layers: dict[str, str],
         peek: bool,
         *,
         additive: bool,
     ) -> _Playback | None:
-        """Write `playback`'s goals at `now` into `out`; None once it has ended there."""
+        """Write `playback`'s goals at `now` into `out`; None once it has ended there.
+
+        Its offsets are from where each joint was at its first tick (`held`). `additive`
+        (idle): added to what the layers below want; else (blink, gesture) overriding
+        them, from what they wanted at that first tick."""
+        if playback.started is None:
+            if peek:
+                raise _MustStep
+            joints = [j for j in playback.behaviour.joints if j in held]
+            base = {j: held[j] for j in joints} if additive else {
+                j: out.get(j, held[j]) for j in joints}
+            playback.begin(now, base, self.period)
+            # Life is foreseen whole when its goals are its own: a blink overrides what is
+            # below it; an idle movement adds to it, so only over joints nothing else moves.
+            if playback.layer == BLINK_LAYER or (
+                playback.layer == IDLE_LAYER and not out.keys() & base.keys()
+            ):
+                playback.foresee(self._counter, self._within, self._reach)
         assert playback.started is not None
         ends = now - playback.started >= playback.behaviour.duration
         if ends and peek:

@@ -23,7 +23,15 @@ from kasparctl.research.figure_layout import (
     title_above,
     widest,
 )
-from kasparctl.research.figure_style import FONT_SIZE, PAGE_WIDTH, SMALL, chunks, new_figure, short
+from kasparctl.research.figure_style import (
+    FONT_SIZE,
+    PAGE_WIDTH,
+    SMALL,
+    chunks,
+    hollow_key,
+    new_figure,
+    short,
+)
 from kasparctl.research.inference import MEASURES, MIN_CLUSTERS, Contrast
 
 ROWS_PER_PANEL = 62
@@ -95,15 +103,7 @@ def _page(panels: list[list[Row]], number: int, count: int) -> Any:
     handles = [
         Line2D([], [], color="0.1", marker="o", label="Hedges' g, 95 % interval"),
         Line2D([], [], color="0.1", marker="D", label="Holm-adjusted p < 0.05"),
-        Line2D(
-            [],
-            [],
-            color="0.1",
-            marker="o",
-            markerfacecolor="white",
-            linestyle="none",
-            label=f"no interval: fewer than {MIN_CLUSTERS} clusters a side",
-        ),
+        hollow_key(f"no interval: fewer than {MIN_CLUSTERS} clusters a side", "0.1"),
     ]
     # The fixed layout (figure_layout): each panel's row labels on its left, the legend
     # and the axis labels below, the title above.

@@ -36,6 +36,7 @@ from kasparctl.research.figure_style import (
     SMALL,
     chunks,
     grid_shape,
+    hollow_key,
     new_figure,
     short,
     whiskers,
@@ -93,15 +94,7 @@ def _page(
         for name, style in layout.legend.items()
     ]
     handles += [
-        Line2D(
-            [],
-            [],
-            color="0.3",
-            marker="o",
-            markerfacecolor="white",
-            linestyle="none",
-            label=f"n < {MIN_N} problems: hollow, not joined",
-        ),
+        hollow_key(f"n < {MIN_N} problems: hollow, not joined"),
         Line2D([], [], color="0.45", linestyle=":", label="no idea: log2(toys offered)"),
     ]
     # The fixed layout (figure_layout): the legend and title first, as they set the

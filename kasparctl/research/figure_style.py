@@ -163,3 +163,12 @@ def whiskers(axes: Any, x: Any, y: Any, low: Any, high: Any, colour: str, **extr
         alpha=0.7,
         **extra,
     )
+
+
+def hollow_key(label: str, colour: str = "0.3") -> Any:
+    """The legend's key for a hollow point: one drawn without the n (or the clusters) its
+    interval or its line needs."""
+    from matplotlib.lines import Line2D  # the figures' own import: style stays light
+
+    return Line2D([], [], color=colour, marker="o", markerfacecolor="white",
+                  linestyle="none", label=label)

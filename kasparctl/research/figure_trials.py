@@ -35,6 +35,7 @@ from kasparctl.research.figure_style import (
     SMALL,
     chunks,
     grid_shape,
+    hollow_key,
     new_figure,
     short,
     whiskers,
@@ -94,17 +95,7 @@ def _page(
         Line2D([], [], label=short(name, 30), **style.line())
         for name, style in layout.legend.items()
     ]
-    handles.append(
-        Line2D(
-            [],
-            [],
-            color="0.3",
-            marker="o",
-            markerfacecolor="white",
-            linestyle="none",
-            label=f"fewer than {MIN_N} learned: hollow, not joined",
-        )
-    )
+    handles.append(hollow_key(f"fewer than {MIN_N} learned: hollow, not joined"))
     # The fixed layout (figure_layout): the legend and title first, as they set the margins.
     legend = legend_below(
         figure,
