@@ -8,10 +8,11 @@ from pathlib import Path
 import pytest
 from fault_rig import Breakage
 
+from hal.errors import ServoFaultError
 from hal.keyfob.gestures import ANSWERS_ONLY, Gesture, GestureKind
 from hal.keyfob.settings import ResearcherSettings
 from kasparctl.config import SessionPlan, resolve_session
-from kasparctl.game.faults import HardwareFault, Problems, step_fault
+from kasparctl.game.faults import HardwareFault, Problems, error_fault, step_fault
 from kasparctl.game.jsonl import read_records
 from kasparctl.game.opening import open_new, planned
 from kasparctl.game.recorder import UNWRITTEN_LIMIT, Recorder
@@ -82,6 +83,16 @@ def test_a_failed_step_is_the_fault_of_the_part_that_failed_or_a_bug() -> None:
     )
     bug = step_fault("teaching", KeyError("bag"))
     assert bug.kind is FaultSource.SOFTWARE and bug.detail == "teaching: KeyError('bag')"
+
+
+def test_an_error_escaping_an_input_handler_is_the_part_that_failed_or_a_bug() -> None:
+    # The soak met it: a stop's rest refused while a servo's silence was latched was
+    # recorded as a software error (a crash) rather than the servo fault it is.
+    refused = ServoFaultError("motion refused while faults are latched: head_pitch: silent")
+    assert error_fault(refused, "the stop") == HardwareFault(FaultSource.SERVO, str(refused))
+    bug = error_fault(KeyError("bag"), "a press")
+    assert bug.kind is FaultSource.SOFTWARE
+    assert bug.detail == "KeyError: 'bag' (while a press)"
 
 
 # -- the recorder ---------------------------------------------------------------------------

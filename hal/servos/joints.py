@@ -348,8 +348,9 @@ class Joints:
 
         Each joint's goal is clamped to its range (logged), and moves from its last
         goal by at most its speed limit times the time since that goal was written
-        (at most `period`: a late step does not catch up; after a move, from the
-        move's last goal). A goal the servo would not notice (the same raw count as
+        (at most `period`, or one count's time at the limit if longer: a late step
+        does not catch up; after a move, from the move's last goal). A goal the servo
+        would not notice (the same raw count as
         the last one) is not sent, and the last goal stays: packets only for change.
         One packet per bus, no waiting beyond it. Joints whose
         torque is off (teaching) are left alone, and so are the joints a move,
@@ -374,7 +375,7 @@ class Joints:
             goals = {}
             for joint in members:
                 start = joint.commanded
-                if joint.name in claimed or joint.torque is not True or start is None:
+                if start is None or not self._takes_stream(joint, claimed):
                     continue
                 goal = self._stream_goal(joint, start, self._clamped(joint, pose[joint.name]),
                                          now, period)
@@ -394,6 +395,12 @@ class Joints:
                 )
         return self._own_values(sent)
 
+    @staticmethod
+    def _takes_stream(joint: _Joint, claimed: frozenset[str]) -> bool:
+        """Whether a stream step may move `joint`: torque on, and no move, set_compliant or
+        rest holding it (a claimed joint's goals come from its claim alone)."""
+        return joint.torque is True and joint.name not in claimed
+
     def _stream_goal(
         self, joint: _Joint, start: float, target: float, now: float, period: float
     ) -> float | None:
@@ -401,8 +408,9 @@ class Joints:
         None when it would not change the servo's count: nothing is sent and nothing changes.
 
         The step is at most the joint's speed limit times the time since its last goal,
-        but never more than a period's worth (a late loop does not catch up), nor less
-        than one count (so a joint slower than a count a period still moves, at its limit).
+        counting no more than a period (a late loop does not catch up) or, if longer, the
+        time one count takes at the limit (so a joint slower than a count a period still
+        moves, a count at a time, at its limit).
         """
         limit = self._limit(joint)
         if joint.sent_at is None:  # never written: what the servo holds is not known
@@ -428,7 +436,7 @@ class Joints:
         for name, degrees in pose.items():
             joint = self._joints[name]
             start = joint.commanded
-            if name in claimed or joint.torque is not True or start is None:
+            if start is None or not self._takes_stream(joint, claimed):
                 continue
             if not math.isfinite(degrees):
                 return True

@@ -87,22 +87,32 @@ def storage_fault(error: StorageFailed) -> HardwareFault:
     return HardwareFault(FaultSource.STORAGE, str(error), error=error)
 
 
-def step_fault(step: str, error: BaseException) -> HardwareFault:
-    """What a step that failed with `error` tells of: the part that failed, or a bug (logged)."""
+def part_fault(error: BaseException) -> HardwareFault | None:
+    """The part that `error` says failed (the voice, the disk, the servos); None for a bug."""
     if isinstance(error, VoiceFailed):
         return HardwareFault(FaultSource.VOICE, str(error))
     if isinstance(error, StorageFailed):
         return storage_fault(error)
     if isinstance(error, HalError):
         return HardwareFault(FaultSource.SERVO, str(error))
+    return None
+
+
+def step_fault(step: str, error: BaseException) -> HardwareFault:
+    """What a step that failed with `error` tells of: the part that failed, or a bug (logged)."""
+    fault = part_fault(error)
+    if fault is not None:
+        return fault
     log.error("step failed", step=step, exc_info=error)
     return HardwareFault(FaultSource.SOFTWARE, f"{step}: {error!r}")
 
 
 def error_fault(error: Exception, doing: str) -> HardwareFault:
-    """An error that escaped the run loop while `doing` something: the disk, or a bug (logged)."""
-    if isinstance(error, StorageFailed):
-        return storage_fault(error)
+    """An error that escaped the run loop while `doing` something: the part that failed (a
+    motion refused while a servo fault is latched is the servo's), or a bug (logged)."""
+    fault = part_fault(error)
+    if fault is not None:
+        return fault
     log.error("software error", doing=doing, exc_info=error)
     return HardwareFault(FaultSource.SOFTWARE, f"{type(error).__name__}: {error} (while {doing})")
 
